@@ -77,6 +77,10 @@ class Twin:
     def __post_init__(self) -> None:
         self.check()
 
+    def __repr__(self) -> str:
+        js = ", ".join(f"{j.name}:{j.type[0]} {j.parent}->{j.child}" for j in self.joints)
+        return f"Twin({self.name!r}, parts={[p.name for p in self.parts]}, joints=[{js}])"
+
     # --------------------------------------------------------------- structure
     def check(self) -> None:
         """Raise RsartError unless the parts/joints form a tree rooted at part 0."""

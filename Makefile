@@ -1,0 +1,41 @@
+# rsart: `make demo` and `make test` each do the whole set-up on a fresh Debian machine
+# (system libraries via apt where missing, .venv with the pinned stack), then run.
+SHELL := /bin/bash
+PYTHON ?= $(shell command -v python3.11 || command -v python3)
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.rsart-installed
+APT_PKGS := libusb-1.0-0 libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1 libosmesa6
+SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
+# Headless GL for pyrender and MuJoCo (same platform for both); rsart falls back to osmesa.
+export PYOPENGL_PLATFORM ?= egl
+export MUJOCO_GL ?= $(PYOPENGL_PLATFORM)
+DEMO_OUT ?= demo_out
+PYTEST_ARGS ?=
+
+.PHONY: setup sysdeps demo test bench clean
+
+setup: sysdeps $(STAMP)
+
+sysdeps:
+	@missing=""; for p in $(APT_PKGS); do dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; \
+	if [ -n "$$missing" ]; then echo "installing system libraries:$$missing"; \
+	  $(SUDO) apt-get update -q && DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -q $$missing; fi
+
+$(STAMP): pyproject.toml requirements.lock
+	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --disable-pip-version-check -r requirements.lock
+	$(PY) -m pip install -q --disable-pip-version-check --no-deps --no-build-isolation -e .
+	@touch $(STAMP)
+
+demo: setup
+	$(PY) -m rsart.demo --out $(DEMO_OUT)
+
+test: setup
+	$(PY) -m pytest -q $(PYTEST_ARGS)
+
+bench: setup
+	for b in benchmarks/*.py; do echo "== $$b"; $(PY) $$b || exit 1; done
+
+clean:
+	rm -rf $(VENV) $(DEMO_OUT) .pytest_cache

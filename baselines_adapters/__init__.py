@@ -1,0 +1,1 @@
+"""baselines_adapters (see README)."""

@@ -1,0 +1,280 @@
+"""Numba CPU kernels for tile binning and 3DGS compositing with a hand-written backward pass.
+
+Hand-written (not PyTorch) because a per-pixel loop with early ray termination touches only the
+entries each pixel really visits, which vectorised PyTorch cannot do without padding.
+
+Every kernel is generic over float32/float64 (numba specialises per dtype); all constants are
+passed in as typed scalars of the same dtype so float32 runs never silently promote to float64.
+Work is parallel over tiles; per-Gaussian gradients are first written per (tile, Gaussian) list
+entry and then summed serially, so results are deterministic and race-free.
+
+Feature layout: F = 4 channels per Gaussian (r, g, b, camera depth z).
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+TILE = 16
+
+
+@njit(cache=True)
+def bin_tiles(xmin, xmax, ymin, ymax, order, tiles_x, n_tiles):
+    """Depth-sorted tile lists. order: (N,) Gaussian ids sorted front to back.
+
+    Returns offsets (T + 1,) int64 and gids (P,) int64 (see pd2gs.render.binning).
+    """
+    counts = np.zeros(n_tiles, np.int64)
+    for g in range(xmin.shape[0]):
+        for ty in range(ymin[g], ymax[g]):
+            for tx in range(xmin[g], xmax[g]):
+                counts[ty * tiles_x + tx] += 1
+    offsets = np.zeros(n_tiles + 1, np.int64)
+    for t in range(n_tiles):
+        offsets[t + 1] = offsets[t] + counts[t]
+    fill = offsets[:-1].copy()
+    gids = np.empty(offsets[n_tiles], np.int64)
+    for i in range(order.shape[0]):
+        g = order[i]
+        for ty in range(ymin[g], ymax[g]):
+            for tx in range(xmin[g], xmax[g]):
+                t = ty * tiles_x + tx
+                gids[fill[t]] = g
+                fill[t] += 1
+    return offsets, gids
+
+
+# consts layout (all in the working dtype), built by ``make_consts``.
+C_AMAX, C_AMIN, C_TMIN, C_ONE, C_HALF, C_ZERO, C_LOG2E, C_LN2, C_CUT, C_Q4, C_Q16, C_Q256 = range(12)
+C_POLY = 12  # 8 Taylor coefficients 1/j!, j = 0..7
+
+
+def make_consts(dtype, alpha_max: float, alpha_min: float, t_min: float) -> np.ndarray:
+    """Typed constants for the kernels (see C_* indices)."""
+    vals = [alpha_max, alpha_min, t_min, 1.0, 0.5, 0.0, 1.4426950408889634, 0.6931471805599453,
+            np.log(alpha_min) - 0.1, 0.25, 1.0 / 16, 1.0 / 256]
+    fact = 1.0
+    for j in range(8):
+        fact *= max(j, 1)
+        vals.append(1.0 / fact)
+    return np.array(vals, dtype=dtype)
+
+
+@njit(inline="always")
+def _exp_neg(x, c):
+    """exp(x) for x in [log(1/255) - 0.1, 0] by range reduction and a degree-7 Taylor
+    polynomial (relative error < 1e-8); returns 0 below that range. Written with arithmetic
+    and selects only, so the pixel loops vectorise (numba has no SIMD exp here)."""
+    nf = np.floor(x * c[C_LOG2E] + c[C_HALF])
+    f = x - nf * c[C_LN2]
+    p = c[C_POLY + 7]
+    for j in range(6, -1, -1):
+        p = p * f + c[C_POLY + j]
+    m = np.int64(-nf) if x >= c[C_CUT] else np.int64(0)
+    s = c[C_ONE]
+    s = s * c[C_HALF] if (m & 1) != 0 else s
+    s = s * c[C_Q4] if (m & 2) != 0 else s
+    s = s * c[C_Q16] if (m & 4) != 0 else s
+    s = s * c[C_Q256] if (m & 8) != 0 else s
+    return p * s if x >= c[C_CUT] else c[C_ZERO]
+
+
+@njit(fastmath=True)
+def _sum(buf):
+    """Sum of a 1-D array (reassociation allowed: vectorised)."""
+    acc = buf[0] - buf[0]
+    for i in range(buf.shape[0]):
+        acc += buf[i]
+    return acc
+
+
+@njit(cache=True)
+def _tile_order(offsets):
+    """Tiles sorted by decreasing list length (largest first balances the threads)."""
+    return np.argsort(-(offsets[1:] - offsets[:-1]), kind="mergesort")
+
+
+@njit(parallel=True, cache=True)
+def forward_kernel(offsets, gids, means2d, conics, opac, feat, width, height, tiles_x,
+                   c, labels, lw_out, maxw_pair):
+    """Front-to-back compositing of each 16x16 tile, Gaussians outer, the 256 pixels inner.
+
+    c: constants from ``make_consts``. labels: (N,) int64 (used when lw_out has L > 0
+    channels); lw_out: (H, W, L) output; maxw_pair: (P,) output (ignored when size 0).
+    Returns feat_out (H, W, 4), trans (H, W), last (H, W) int64 = one past the last composited
+    list entry of each pixel (the backward walks back from there).
+    """
+    dt = means2d.dtype
+    one, zero = c[C_ONE], c[C_ZERO]
+    out = np.zeros((height, width, 4), dt)
+    trans = np.ones((height, width), dt)
+    last = np.zeros((height, width), np.int64)
+    n_lab = lw_out.shape[2]
+    want_max = maxw_pair.shape[0] > 0
+    order = _tile_order(offsets)
+    npx = TILE * TILE
+    for i in prange(order.shape[0]):
+        t = order[i]
+        x0 = (t % tiles_x) * TILE
+        y0 = (t // tiles_x) * TILE
+        start, end = offsets[t], offsets[t + 1]
+        px = np.empty(npx, dt)
+        py = np.empty(npx, dt)
+        act = np.zeros(npx, dt)
+        T = np.ones(npx, dt)
+        lst = np.zeros(npx, np.int64)
+        acc = np.zeros((4, npx), dt)
+        wbuf = np.zeros(npx, dt)
+        lw = np.zeros((max(n_lab, 1), npx), dt)
+        for p in range(npx):
+            px[p] = x0 + p % TILE
+            py[p] = y0 + p // TILE
+            if x0 + p % TILE < width and y0 + p // TILE < height:
+                act[p] = one
+        for k in range(start, end):
+            if (k - start) % 32 == 31 and _sum(act) == zero:
+                break
+            g = gids[k]
+            mx, my = means2d[g, 0], means2d[g, 1]
+            ca, cb, cc, o = conics[g, 0], conics[g, 1], conics[g, 2], opac[g]
+            f0, f1, f2, f3 = feat[g, 0], feat[g, 1], feat[g, 2], feat[g, 3]
+            for p in range(npx):
+                dx = px[p] - mx
+                dy = py[p] - my
+                power = -c[C_HALF] * (ca * dx * dx + cc * dy * dy) - cb * dx * dy
+                alpha = min(c[C_AMAX], o * _exp_neg(power, c))
+                tp = T[p]
+                test = tp * (one - alpha)
+                good = (power <= zero) & (alpha >= c[C_AMIN]) & (act[p] > zero)
+                contrib = good & (test >= c[C_TMIN])
+                w = alpha * tp if contrib else zero
+                wbuf[p] = w
+                acc[0, p] += w * f0
+                acc[1, p] += w * f1
+                acc[2, p] += w * f2
+                acc[3, p] += w * f3
+                T[p] = test if contrib else tp
+                stop = good & (test < c[C_TMIN])
+                act[p] = zero if stop else act[p]
+                lst[p] = k + 1 if contrib else lst[p]
+            if n_lab > 0:
+                lab = labels[g]
+                for p in range(npx):
+                    lw[lab, p] += wbuf[p]
+            if want_max:
+                maxw_pair[k] = np.max(wbuf)
+        for p in range(npx):
+            x, y = x0 + p % TILE, y0 + p // TILE
+            if x < width and y < height:
+                for j in range(4):
+                    out[y, x, j] = acc[j, p]
+                trans[y, x] = T[p]
+                last[y, x] = lst[p]
+                for j in range(n_lab):
+                    lw_out[y, x, j] = lw[j, p]
+    return out, trans, last
+
+
+@njit(parallel=True, cache=True)
+def backward_kernel(offsets, gids, means2d, conics, opac, feat, width, height, tiles_x,
+                    c, trans, last, g_feat, g_trans):
+    """Exact gradients of ``forward_kernel``: each pixel walks its list back to front
+    (transmittance recovered by division, as in 3DGS), Gaussians outer, pixels inner.
+
+    g_feat: (H, W, 4) dL/dfeat_out, g_trans: (H, W) dL/dtrans.
+    Returns pair_grad (P, 10): per list entry [dmean2d(2), dconic(3), dopacity, dfeat(4)].
+    """
+    dt = means2d.dtype
+    one, zero, half = c[C_ONE], c[C_ZERO], c[C_HALF]
+    pair_grad = np.zeros((gids.shape[0], 10), dt)
+    order = _tile_order(offsets)
+    npx = TILE * TILE
+    for i in prange(order.shape[0]):
+        t = order[i]
+        x0 = (t % tiles_x) * TILE
+        y0 = (t // tiles_x) * TILE
+        start = offsets[t]
+        px = np.empty(npx, dt)
+        py = np.empty(npx, dt)
+        T = np.ones(npx, dt)
+        tfin = np.ones(npx, dt)
+        lst = np.zeros(npx, np.int64)
+        gf = np.zeros((4, npx), dt)
+        gt = np.zeros(npx, dt)
+        S = np.zeros((4, npx), dt)
+        buf = np.zeros((10, npx), dt)
+        kmax = start
+        for p in range(npx):
+            x, y = x0 + p % TILE, y0 + p // TILE
+            px[p] = x
+            py[p] = y
+            if x < width and y < height:
+                T[p] = trans[y, x]
+                tfin[p] = trans[y, x]
+                lst[p] = last[y, x]
+                kmax = max(kmax, last[y, x])
+                gt[p] = g_trans[y, x]
+                for j in range(4):
+                    gf[j, p] = g_feat[y, x, j]
+        for k in range(kmax - 1, start - 1, -1):
+            g = gids[k]
+            mx, my = means2d[g, 0], means2d[g, 1]
+            ca, cb, cc, o = conics[g, 0], conics[g, 1], conics[g, 2], opac[g]
+            f0, f1, f2, f3 = feat[g, 0], feat[g, 1], feat[g, 2], feat[g, 3]
+            for p in range(npx):
+                dx = px[p] - mx
+                dy = py[p] - my
+                power = -half * (ca * dx * dx + cc * dy * dy) - cb * dx * dy
+                gauss = _exp_neg(power, c)
+                raw = o * gauss
+                alpha = min(c[C_AMAX], raw)
+                good = (power <= zero) & (alpha >= c[C_AMIN]) & (k < lst[p])
+                om = one - alpha
+                ti = T[p] / om if good else T[p]
+                wt = alpha * ti if good else zero
+                dal = ti * (gf[0, p] * (f0 - S[0, p]) + gf[1, p] * (f1 - S[1, p])
+                            + gf[2, p] * (f2 - S[2, p]) + gf[3, p] * (f3 - S[3, p])) \
+                    - gt[p] * tfin[p] / om
+                dal = dal if good else zero
+                S[0, p] = alpha * f0 + om * S[0, p] if good else S[0, p]
+                S[1, p] = alpha * f1 + om * S[1, p] if good else S[1, p]
+                S[2, p] = alpha * f2 + om * S[2, p] if good else S[2, p]
+                S[3, p] = alpha * f3 + om * S[3, p] if good else S[3, p]
+                T[p] = ti
+                dgeo = dal if raw <= c[C_AMAX] else zero
+                dpow = alpha * dgeo
+                buf[0, p] = dpow * (ca * dx + cb * dy)
+                buf[1, p] = dpow * (cb * dx + cc * dy)
+                buf[2, p] = -half * dx * dx * dpow
+                buf[3, p] = -dx * dy * dpow
+                buf[4, p] = -half * dy * dy * dpow
+                buf[5, p] = gauss * dgeo
+                buf[6, p] = wt * gf[0, p]
+                buf[7, p] = wt * gf[1, p]
+                buf[8, p] = wt * gf[2, p]
+                buf[9, p] = wt * gf[3, p]
+            for j in range(10):
+                pair_grad[k, j] = _sum(buf[j])
+    return pair_grad
+
+
+@njit(cache=True)
+def reduce_pairs(gids, pair_grad, n):
+    """Sum per-entry gradients (P, 10) into per-Gaussian gradients (N, 10)."""
+    out = np.zeros((n, pair_grad.shape[1]), pair_grad.dtype)
+    for k in range(gids.shape[0]):
+        g = gids[k]
+        for j in range(pair_grad.shape[1]):
+            out[g, j] += pair_grad[k, j]
+    return out
+
+
+@njit(cache=True)
+def reduce_max(gids, pair_val, n):
+    """Max of per-entry values (P,) per Gaussian -> (N,)."""
+    out = np.zeros(n, pair_val.dtype)
+    for k in range(gids.shape[0]):
+        g = gids[k]
+        if pair_val[k] > out[g]:
+            out[g] = pair_val[k]
+    return out

@@ -1,0 +1,5 @@
+import sys
+
+from rsart.cli import main
+
+sys.exit(main())

@@ -1,0 +1,76 @@
+"""The ``rsart`` command line: one entry point, one module per subcommand.
+
+Each module in :data:`COMMANDS` exposes ``register(subparsers)``, which adds its subparser and
+sets ``func`` (called with the parsed args; returns an exit code). Errors rsart raises on
+purpose (:class:`rsart.errors.RsartError`) are printed without a traceback and exit 2.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from ..errors import RsartError
+
+#: Subcommand modules (in --help order). A module that fails to import is reported, not fatal.
+COMMANDS = [
+    "rsart.cli.basic",        # validate, verify, info
+    "rsart.cli.generate",     # generate (procedural twins, rsart-synth)
+    "rsart.cli.render",       # render (capture simulator)
+    "rsart.cli.show",         # show (pictures)
+    "rsart.cli.convert",      # convert (PartNet-Mobility, URDF, USD)
+    "rsart.cli.validate_submission",  # validate-submission
+]
+
+DESCRIPTION = """\
+rsart: datasets and benchmark for articulated-object reconstruction (RS-Art format).
+
+Conventions everywhere: metres and radians (degrees only in metric reports); world frame =
+the object's base frame, z up; part meshes stored at the rest configuration (all joints 0);
+cameras OpenCV (x right, y down, z forward) with camera-to-world extrinsics; depth PNGs are
+16-bit millimetres (0 = no measurement); masks are part index + 1 (0 = background).
+Exit codes: 0 success, 1 problems found (verify), 2 invalid input or usage.
+"""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from .. import __version__
+
+    parser = argparse.ArgumentParser(prog="rsart", description=DESCRIPTION,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--version", action="version", version=f"rsart {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name in COMMANDS:
+        try:
+            mod = importlib.import_module(name)
+        except ModuleNotFoundError as e:
+            if e.name == name:  # subcommand not installed in this build
+                continue
+            raise
+        mod.register(sub)
+    return parser
+
+
+def run(func, args) -> int:
+    """Call a subcommand, turning rsart errors into a message and exit code 2 (no traceback)."""
+    try:
+        return int(func(args) or 0)
+    except RsartError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 2
+    return run(args.func, args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
