@@ -162,6 +162,8 @@ def _write_part(stage, root: str, part: TwinPart, pname: str, usd_dir: Path, tex
     elif (c := _colors(part.mesh)) is not None:
         _write_colors(geom, c)
 
+    if part.visuals:
+        UsdGeom.Scope.Define(stage, f"{root}/{pname}/visuals")
     for k, vm in enumerate(part.visuals):
         vpath = f"{root}/{pname}/visuals/visual_{k}"
         vmesh = _mesh_prim(stage, vpath, np.asarray(vm.vertices, dtype=np.float64) - centre, vm.faces)
@@ -189,6 +191,8 @@ def _write_joint(stage, root: str, j, jname: str, body_paths: list[str], centres
     axis = axis / np.linalg.norm(axis)
     origin = np.asarray(j.origin, dtype=np.float64)
     w, x, y, z = quat_from_matrix(rotation_x_to(axis))
+    if w < 0:  # canonical sign (q and -q are the same rotation)
+        w, x, y, z = -w, -x, -y, -z
     q = Gf.Quatf(w, Gf.Vec3f(x, y, z))
     jt.CreateBody0Rel().SetTargets([Sdf.Path(body_paths[j.parent])])
     jt.CreateBody1Rel().SetTargets([Sdf.Path(body_paths[j.child])])
@@ -232,6 +236,8 @@ def build_stage(twin: Twin, usd_dir: Path, units: str = "m", texture_files: dict
     scene.CreateGravityDirectionAttr(Gf.Vec3f(0, 0, -1))
     scene.CreateGravityMagnitudeAttr(9.81)
 
+    for scope in ("joints", "Looks"):
+        UsdGeom.Scope.Define(stage, f"{root}/{scope}")
     taken = {"joints", "Looks"}
     pnames = [prim_name(p.name, taken) for p in twin.parts]
     pending: dict[Path, bytes] = {}

@@ -1,0 +1,659 @@
+"""rsart's USD reader: a UsdPhysics articulation (rsart's layout or a foreign one) -> a Twin.
+
+What is read (see docs/usd.md):
+
+* bodies: prims with ``PhysicsRigidBodyAPI`` plus every prim a joint's ``body0``/``body1`` targets
+  (a target inside a rigid body resolves to that body, as PhysX does); a body's geometry is every
+  ``Mesh``/``Cube``/``Sphere``/``Cylinder`` below it (instance proxies included, nested bodies
+  excluded) under its full authored transform;
+* joints: ``PhysicsRevoluteJoint``/``PhysicsPrismaticJoint`` become rsart joints (``body0`` = parent,
+  ``body1`` = child), ``PhysicsFixedJoint`` merges two bodies into one part (or anchors the base to
+  the world); any other joint type is an error naming its prim;
+* rest configuration: a joint's value is 0 when its two frames coincide
+  (``body0·local0 == body1·local1``); bodies authored at another joint value are moved back;
+* frames/units: stage ``upAxis`` Y is rotated into rsart's Z-up world by +90° about X, lengths are
+  scaled by ``metersPerUnit``, revolute limits go from degrees to radians.
+
+Safety: the file and every layer it composes must lie inside the USD file's folder; textures
+outside it are skipped with a warning. Every problem is reported as a ValidationError entry whose
+path is the prim path.
+"""
+from __future__ import annotations
+
+import math
+import re
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from .errors import Problems, RsartError
+from .format import Joint
+from .kinematics import Twin, TwinPart
+from .usd import AXIS_VECTORS, Y_UP_TO_Z_UP, matrix_from_quat
+
+_SAFE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]{0,127}$")
+_MAX_LAYERS = 256
+
+
+@dataclass
+class _UsdJoint:
+    """One parsed UsdPhysics joint; frames are (4, 4) rigid transforms in the stage's world (authored pose)."""
+
+    path: str
+    kind: str  # revolute | prismatic | fixed
+    name: str
+    body0: str | None  # body prim path, None = the world
+    body1: str | None
+    frame0: np.ndarray
+    frame1: np.ndarray
+    axis: str
+    limits: tuple[float, float] | None  # stage units: degrees (revolute) or stage lengths (prismatic)
+    rsart: dict
+
+
+# ----------------------------------------------------------------------------- opening
+def _open_stage(path: Path):
+    """Open ``path`` after checking that every composed layer lies inside its folder."""
+    from pxr import Sdf, Usd
+
+    root = path.parent.resolve()
+    layer = Sdf.Layer.FindOrOpen(str(path))
+    if layer is None:
+        raise RsartError(f"{path}: not a readable USD file")
+    seen, todo = {layer.identifier}, [layer]
+    while todo:
+        lay = todo.pop()
+        for dep in lay.GetCompositionAssetDependencies():
+            absdep = lay.ComputeAbsolutePath(dep)
+            plain = Path(absdep.split("[", 1)[0]).resolve()
+            if plain != root and root not in plain.parents:
+                raise RsartError(f"{path}: layer {lay.identifier} refers to {dep!r}, outside {root}; "
+                                 "rsart reads only files inside the USD file's folder")
+            if absdep not in seen and len(seen) < _MAX_LAYERS and plain.is_file():
+                seen.add(absdep)
+                sub = Sdf.Layer.FindOrOpen(absdep)
+                if sub is not None:
+                    todo.append(sub)
+    return Usd.Stage.Open(layer, Usd.Stage.LoadAll)
+
+
+# ----------------------------------------------------------------------------- small helpers
+def _mat(gf) -> np.ndarray:
+    """(4, 4) column-vector transform from a Gf.Matrix4d (USD uses row vectors)."""
+    return np.array(gf, dtype=np.float64).T
+
+
+def _rigid(T: np.ndarray) -> np.ndarray:
+    """The rotation+translation of an affine (4, 4) (scale/shear removed by polar decomposition)."""
+    U, _, Vt = np.linalg.svd(T[:3, :3])
+    out = np.eye(4)
+    out[:3, :3] = U @ Vt
+    out[:3, 3] = T[:3, 3]
+    return out
+
+
+def _transform_problem(T: np.ndarray) -> str | None:
+    if not np.all(np.isfinite(T)):
+        return "non-finite transform (NaN or inf)"
+    d = float(np.linalg.det(T[:3, :3]))
+    if abs(d) < 1e-12:
+        return "degenerate transform (zero scale)"
+    if d < 0:
+        return "mirrored transform (negative scale) is not supported for bodies or joint frames"
+    return None
+
+
+def _safe_name(name: object, fallback: str) -> str:
+    if isinstance(name, str) and _SAFE.match(name):
+        return name
+    s = re.sub(r"[^A-Za-z0-9_.\-]", "_", fallback).lstrip("_.-")[:128]
+    return s or "part"
+
+
+def _unique(name: str, taken: set[str]) -> str:
+    out, k = name, 1
+    while out in taken:
+        out = f"{name}_{k}"
+        k += 1
+    taken.add(out)
+    return out
+
+
+def _custom(prim, name: str):
+    a = prim.GetAttribute(name)
+    return a.Get() if a and a.HasAuthoredValue() else None
+
+
+# ----------------------------------------------------------------------------- joints
+def _frame(stage, world, target: str | None, pos, rot, jp: str, side: int, pb: Problems) -> np.ndarray | None:
+    """World (stage) joint frame on one side: the target prim's transform · (localPos, localRot)."""
+    p = np.array(list(pos) if pos is not None else [0.0, 0.0, 0.0], dtype=np.float64)
+    if rot is None:
+        q = np.array([1.0, 0.0, 0.0, 0.0])
+    else:
+        q = np.array([rot.GetReal(), *list(rot.GetImaginary())], dtype=np.float64)
+    if not (np.all(np.isfinite(p)) and np.all(np.isfinite(q))):
+        pb.add(jp, f"localPos{side}/localRot{side} contain NaN or inf")
+        return None
+    if np.linalg.norm(q) < 1e-6:
+        pb.add(jp, f"localRot{side} is a zero quaternion (no orientation)")
+        return None
+    L = np.eye(4)
+    L[:3, :3] = matrix_from_quat(*(q / np.linalg.norm(q)))
+    if target is None:
+        L[:3, 3] = p
+        return L
+    T = world(target)
+    if (msg := _transform_problem(T)) is not None:
+        pb.add(target, msg)
+        return None
+    F = _rigid(T) @ L
+    F[:3, 3] = (T @ np.append(p, 1.0))[:3]  # localPos is in the body's (scaled) local space
+    return F
+
+
+def _limits(jt, kind: str, jp: str, pb: Problems) -> tuple[float, float] | None:
+    lo_a, hi_a = jt.GetLowerLimitAttr(), jt.GetUpperLimitAttr()
+    lo = lo_a.Get() if lo_a and lo_a.HasAuthoredValue() else -math.inf
+    hi = hi_a.Get() if hi_a and hi_a.HasAuthoredValue() else math.inf
+    lo, hi = float(lo), float(hi)
+    if math.isnan(lo) or math.isnan(hi):
+        pb.add(jp, "lowerLimit/upperLimit is NaN")
+        return None
+    if math.isinf(lo) and math.isinf(hi) and lo < 0 < hi:
+        if kind == "prismatic":
+            pb.add(jp, "prismatic joint has no finite limits (rsart needs [lower, upper])")
+        return None
+    if math.isinf(lo) or math.isinf(hi):
+        pb.add(jp, f"one-sided or infinite limits [{lo}, {hi}] are not supported (give both or neither)")
+        return None
+    if lo > hi:
+        pb.add(jp, f"lowerLimit {lo} > upperLimit {hi}")
+        return None
+    return lo, hi
+
+
+def _parse_joint(stage, prim, kind: str, body_of, world, pb: Problems) -> _UsdJoint | None:
+    from pxr import UsdPhysics
+
+    jp = str(prim.GetPath())
+    j = UsdPhysics.Joint(prim)
+    n0 = len(pb)
+    ends: list[str | None] = []
+    for side, rel in ((0, j.GetBody0Rel()), (1, j.GetBody1Rel())):
+        targets = rel.GetTargets() if rel else []
+        if len(targets) > 1:
+            pb.add(jp, f"body{side} has {len(targets)} targets; expected one")
+        if not targets:
+            ends.append(None)
+            continue
+        t = stage.GetPrimAtPath(targets[0])
+        if not t or not t.IsValid():
+            pb.add(jp, f"body{side} targets {targets[0]}, which does not exist")
+            ends.append(None)
+            continue
+        ends.append(str(t.GetPath()))
+    if len(pb) > n0:
+        return None
+    if ends[0] is None and ends[1] is None:
+        pb.add(jp, "joint has neither body0 nor body1")
+        return None
+    f0 = _frame(stage, world, ends[0], j.GetLocalPos0Attr().Get(), j.GetLocalRot0Attr().Get(), jp, 0, pb)
+    f1 = _frame(stage, world, ends[1], j.GetLocalPos1Attr().Get(), j.GetLocalRot1Attr().Get(), jp, 1, pb)
+    axis, limits = "X", None
+    if kind != "fixed":
+        jt = UsdPhysics.RevoluteJoint(prim) if kind == "revolute" else UsdPhysics.PrismaticJoint(prim)
+        axis = str(jt.GetAxisAttr().Get())
+        if axis not in AXIS_VECTORS:
+            pb.add(jp, f"axis {axis!r} is not one of X, Y, Z")
+        limits = _limits(jt, kind, jp, pb)
+        if None in ends:
+            pb.add(jp, f"{kind} joint connects a body to the world; rsart needs the static base as a body "
+                       "(anchor it with a fixed joint) and the joint between two bodies")
+    if len(pb) > n0:
+        return None
+    b0 = body_of(ends[0]) if ends[0] else None
+    b1 = body_of(ends[1]) if ends[1] else None
+    if b0 is not None and b0 == b1:
+        pb.add(jp, f"body0 and body1 are the same body {b0}")
+        return None
+    rs = {k: _custom(prim, f"rsart:{k}") for k in ("name", "axis", "origin", "limits")}
+    return _UsdJoint(jp, kind, _safe_name(rs["name"], prim.GetName()), b0, b1, f0, f1, axis, limits, rs)
+
+
+# ----------------------------------------------------------------------------- tree
+def _tree(bodies: list[str], joints: list[_UsdJoint], pb: Problems) -> tuple[str, dict[str, _UsdJoint]]:
+    """(root body, body -> the joint whose body1 it is). Problems: two parents, roots != 1, cycles."""
+    parent: dict[str, _UsdJoint] = {}
+    anchors: dict[str, str] = {}
+    for j in joints:
+        if j.body0 is None or j.body1 is None:  # fixed joint to the world
+            anchors[j.body1 or j.body0] = j.path
+            continue
+        if j.body1 in parent:
+            pb.add(j.path, f"body {j.body1} is already body1 of {parent[j.body1].path}; a part has one parent joint")
+            continue
+        parent[j.body1] = j
+    for b, jp in anchors.items():
+        if b in parent:
+            pb.add(jp, f"anchors {b} to the world, but {b} is also body1 of {parent[b].path}")
+    roots = [b for b in bodies if b not in parent]
+    if len(roots) != 1:
+        if roots:
+            pb.add("/", f"{len(roots)} root bodies {roots}: expected exactly one static base with every other "
+                        "body attached to it through joints")
+        else:
+            pb.add("/", f"no root body: the joints form a cycle through {sorted(parent)}")
+        return "", parent
+    root = roots[0]
+    children: dict[str, list[str]] = {}
+    for b, j in parent.items():
+        children.setdefault(j.body0, []).append(b)
+    reached, stack = {root}, [root]
+    while stack:
+        for c in children.get(stack.pop(), []):
+            if c not in reached:
+                reached.add(c)
+                stack.append(c)
+    lost = [b for b in bodies if b not in reached]
+    if lost:
+        pb.add(parent[lost[0]].path if lost[0] in parent else "/",
+               f"joint cycle: bodies {lost} do not lead back to the root body {root}")
+    return root, parent
+
+
+# ----------------------------------------------------------------------------- main
+def _read_stage(stage, path: Path) -> Twin:
+    from pxr import Usd, UsdGeom, UsdPhysics
+
+    pb = Problems()
+    mpu = float(UsdGeom.GetStageMetersPerUnit(stage))
+    up = str(UsdGeom.GetStageUpAxis(stage))
+    if not math.isfinite(mpu) or mpu <= 0:
+        pb.add("/", f"metersPerUnit {mpu} must be a positive finite number")
+    if up not in ("Y", "Z"):
+        pb.add("/", f"upAxis {up!r} must be Y or Z")
+    pb.raise_if_any(str(path))
+    C = np.eye(4)
+    C[:3, :3] = mpu * (Y_UP_TO_Z_UP if up == "Y" else np.eye(3))
+
+    xcache = UsdGeom.XformCache(Usd.TimeCode.Default())
+    cache: dict[str, np.ndarray] = {}
+
+    def world(p: str) -> np.ndarray:
+        if p not in cache:
+            cache[p] = _mat(xcache.GetLocalToWorldTransform(stage.GetPrimAtPath(p)))
+        return cache[p]
+
+    prims = list(stage.Traverse(Usd.TraverseInstanceProxies()))
+    order = {str(p.GetPath()): i for i, p in enumerate(prims)}
+    rigid = {str(p.GetPath()) for p in prims if p.HasAPI(UsdPhysics.RigidBodyAPI)}
+
+    def body_of(target: str) -> str:
+        prim = stage.GetPrimAtPath(target)
+        while prim and not prim.IsPseudoRoot():
+            if str(prim.GetPath()) in rigid:
+                return str(prim.GetPath())
+            prim = prim.GetParent()
+        return target
+
+    joints: list[_UsdJoint] = []
+    for p in prims:
+        if not p.IsA(UsdPhysics.Joint):
+            continue
+        if UsdPhysics.Joint(p).GetJointEnabledAttr().Get() is False:
+            continue
+        kind = ("revolute" if p.IsA(UsdPhysics.RevoluteJoint) else "prismatic" if p.IsA(UsdPhysics.PrismaticJoint)
+                else "fixed" if p.IsA(UsdPhysics.FixedJoint) else None)
+        if kind is None:
+            pb.add(str(p.GetPath()), f"unsupported joint type {p.GetTypeName() or 'PhysicsJoint'} "
+                                     "(rsart twins have revolute, prismatic and fixed joints only)")
+            continue
+        j = _parse_joint(stage, p, kind, body_of, world, pb)
+        if j is not None:
+            joints.append(j)
+    bodies = set(rigid) | {b for j in joints for b in (j.body0, j.body1) if b}
+    bodies_sorted = sorted(bodies, key=lambda b: order.get(b, len(order)))
+    if not bodies_sorted:
+        pb.add("/", "no rigid bodies (PhysicsRigidBodyAPI) and no joints: not a USD articulation")
+    pb.raise_if_any(str(path))
+    root, parent = _tree(bodies_sorted, joints, pb)
+    pb.raise_if_any(str(path))
+
+    # rest correction per body (stage world): D_child = (D_parent · F0) · F1^-1
+    D: dict[str, np.ndarray] = {root: np.eye(4)}
+    pending = [b for b in bodies_sorted if b != root]
+    while pending:
+        nxt = []
+        for b in pending:
+            j = parent[b]
+            if j.body0 in D:
+                D[b] = D[j.body0] @ j.frame0 @ np.linalg.inv(j.frame1)
+            else:
+                nxt.append(b)
+        pending = nxt
+
+    # parts: bodies merged through fixed joints; the base part first, then body order
+    group = {}
+    for b in bodies_sorted:
+        g = b
+        while g in parent and parent[g].kind == "fixed":
+            g = parent[g].body0
+        group[b] = g
+    tops = [root] + [b for b in bodies_sorted if group[b] == b and b != root]
+    index = {g: i for i, g in enumerate(tops)}
+
+    parts: list[TwinPart] = []
+    taken: set[str] = set()
+    for g in tops:
+        members = [b for b in bodies_sorted if group[b] == g]
+        mesh, visuals = body_meshes(stage, members, bodies, C, D, world, path.parent.resolve(), pb)
+        gprim = stage.GetPrimAtPath(g)
+        name = _unique(_safe_name(_custom(gprim, "rsart:name"), gprim.GetName()), taken)
+        if mesh is not None:
+            parts.append(TwinPart(len(parts), name, mesh, visuals))
+    pb.raise_if_any(str(path))
+
+    out_joints, jtaken = [], set()
+    for j in joints:
+        if j.kind == "fixed":
+            continue
+        F0 = C @ D[j.body0] @ j.frame0
+        axis = F0[:3, :3] @ AXIS_VECTORS[j.axis]
+        axis = axis / np.linalg.norm(axis)
+        origin = F0[:3, 3].copy()
+        limits = j.limits
+        if limits is not None:
+            limits = ((math.radians(limits[0]), math.radians(limits[1])) if j.kind == "revolute"
+                      else (limits[0] * mpu, limits[1] * mpu))
+        axis, origin, limits = _rsart_exact(j.rsart, axis, origin, limits)
+        out_joints.append(Joint(_unique(j.name, jtaken), j.kind, index[group[j.body0]], index[group[j.body1]],
+                                axis, origin, limits))
+    layer_data = stage.GetRootLayer().customLayerData
+    dp = stage.GetDefaultPrim()
+    name = layer_data.get("rsart:twinName") if isinstance(layer_data.get("rsart:twinName"), str) else None
+    name = name or (dp.GetName() if dp else path.stem)
+    try:
+        return Twin(name, parts, out_joints)
+    except RsartError as e:
+        raise RsartError(f"{path}: {e}") from None
+
+
+def _rsart_exact(rs: dict, axis: np.ndarray, origin: np.ndarray, limits):
+    """Prefer rsart's double-precision copies (``rsart:axis/origin/limits``) when they agree with UsdPhysics's."""
+    try:
+        a = np.array(list(rs["axis"]), dtype=np.float64) if rs.get("axis") is not None else None
+        o = np.array(list(rs["origin"]), dtype=np.float64) if rs.get("origin") is not None else None
+        lim = tuple(float(x) for x in rs["limits"]) if rs.get("limits") is not None else None
+    except (TypeError, ValueError):
+        return axis, origin, limits
+    if a is not None and a.shape == (3,) and np.all(np.isfinite(a)) and np.linalg.norm(a) > 0:
+        a = a / np.linalg.norm(a)
+        if np.dot(a, axis) > math.cos(1e-4):
+            axis = a
+    if o is not None and o.shape == (3,) and np.all(np.isfinite(o)):
+        d = o - origin
+        off = np.linalg.norm(d - np.dot(d, axis) * axis)
+        if off < 1e-5 * (1.0 + np.linalg.norm(origin)):
+            origin = o
+    if limits is not None and lim is not None and len(lim) == 2 and all(map(math.isfinite, lim)):
+        if all(abs(x - y) <= 1e-4 * max(1.0, abs(y)) for x, y in zip(lim, limits)):
+            limits = lim
+    return axis, origin, limits
+
+
+# ----------------------------------------------------------------------------- geometry
+@dataclass
+class _Piece:
+    """One geometry prim of a body, in rsart's world at rest: merged ``geom`` and optional textured ``visual``."""
+
+    path: str
+    role: str | None  # rsart:role ("geometry" | "visual") or None for foreign files
+    renderable: bool
+    geom: trimesh.Trimesh
+    visual: trimesh.Trimesh | None
+
+
+def _triangulate(counts: np.ndarray, indices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Fan-triangulate USD polygons: ((T, 3) corner indices into ``indices``, (T,) source face of each).
+
+    Hand-written because USD polygons arrive as (counts, indices) arrays; a fan is exact for the
+    convex polygons DCC tools export and keeps faceVarying primvars addressable per corner.
+    """
+    ntri = counts - 2
+    face = np.repeat(np.arange(len(counts)), ntri)
+    starts = np.cumsum(counts) - counts
+    k = np.arange(len(face)) - np.repeat(np.cumsum(ntri) - ntri, ntri)
+    c0 = starts[face]
+    return np.stack([c0, c0 + k + 1, c0 + k + 2], axis=1), face
+
+
+def _primvar(prim, name: str):
+    """(flattened values array, interpolation) of primvar ``name``, or None."""
+    from pxr import UsdGeom
+
+    pv = UsdGeom.PrimvarsAPI(prim).GetPrimvar(name)
+    if not pv or not pv.HasValue():
+        return None
+    vals = pv.ComputeFlattened()
+    return (np.array(vals, dtype=np.float64) if vals is not None else None), str(pv.GetInterpolation())
+
+
+def _texture(prim, root_dir: Path):
+    """(PIL image, uv primvar name) of the UsdUVTexture feeding the bound material's diffuseColor, or None."""
+    from pxr import UsdShade
+
+    mat, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()
+    if not mat:
+        return None
+    surf = mat.ComputeSurfaceSource()[0]
+    inp = surf.GetInput("diffuseColor") if surf else None
+    srcs = inp.GetConnectedSources()[0] if inp else []
+    if not srcs:
+        return None
+    tex = UsdShade.Shader(srcs[0].source.GetPrim())
+    if tex.GetIdAttr().Get() != "UsdUVTexture" or not tex.GetInput("file"):
+        return None
+    asset = tex.GetInput("file").Get()
+    varname = "st"
+    st = tex.GetInput("st")
+    st_src = st.GetConnectedSources()[0] if st else []
+    if st_src:
+        vn = UsdShade.Shader(st_src[0].source.GetPrim()).GetInput("varname")
+        if vn and vn.Get():
+            varname = str(vn.Get())
+    resolved = getattr(asset, "resolvedPath", "") if asset is not None else ""
+    where = f"{prim.GetPath()}: texture {getattr(asset, 'path', asset)!r}"
+    if not resolved or "[" in resolved:
+        warnings.warn(f"{where} not found (or packaged); the visual is kept untextured", stacklevel=3)
+        return None
+    p = Path(resolved).resolve()
+    if root_dir not in p.parents:
+        warnings.warn(f"{where} lies outside {root_dir}; not read", stacklevel=3)
+        return None
+    try:
+        from PIL import Image
+
+        with Image.open(p) as im:
+            img = im.convert("RGBA") if im.mode in ("RGBA", "LA", "P") else im.convert("RGB")
+    except Exception as e:  # a broken texture should not sink the geometry
+        warnings.warn(f"{where} cannot be read ({e}); the visual is kept untextured", stacklevel=3)
+        return None
+    return img, varname
+
+
+def _colors(prim, n_points: int, n_faces: int, face_of_tri: np.ndarray):
+    """trimesh ColorVisuals kwargs from displayColor/displayOpacity (vertex, uniform or constant), or {}."""
+    col = _primvar(prim, "displayColor")
+    if col is None or col[0] is None or col[0].ndim != 2 or col[0].shape[1] != 3 or not np.all(np.isfinite(col[0])):
+        return {}
+    rgb, interp = col
+    op = _primvar(prim, "displayOpacity")
+    alpha = op[0] if op is not None and op[0] is not None and op[0].shape == (len(rgb),) else np.ones(len(rgb))
+    rgba = np.clip(np.round(np.column_stack([rgb, alpha]) * 255.0), 0, 255).astype(np.uint8)
+    if interp in ("vertex", "varying") and len(rgba) == n_points:
+        return {"vertex_colors": rgba}
+    if interp == "uniform" and len(rgba) == n_faces:
+        return {"face_colors": rgba[face_of_tri]}
+    if interp == "constant" and len(rgba) >= 1:
+        return {"face_colors": np.repeat(rgba[:1], len(face_of_tri), axis=0)}
+    return {}
+
+
+def _gprim_mesh(prim, pb: Problems) -> trimesh.Trimesh | None:
+    """Cube/Sphere/Cylinder as a trimesh in the prim's local frame."""
+    from pxr import UsdGeom
+
+    pp = str(prim.GetPath())
+    if prim.IsA(UsdGeom.Cube):
+        dims = {"size": UsdGeom.Cube(prim).GetSizeAttr().Get()}
+    elif prim.IsA(UsdGeom.Sphere):
+        dims = {"radius": UsdGeom.Sphere(prim).GetRadiusAttr().Get()}
+    else:
+        c = UsdGeom.Cylinder(prim)
+        dims = {"radius": c.GetRadiusAttr().Get(), "height": c.GetHeightAttr().Get()}
+    if not all(v is not None and math.isfinite(v) and v > 0 for v in dims.values()):
+        pb.add(pp, f"{prim.GetTypeName()} needs positive finite dimensions, got {dims}")
+        return None
+    if "size" in dims:
+        return trimesh.creation.box(extents=[dims["size"]] * 3)
+    if "height" not in dims:
+        return trimesh.creation.icosphere(subdivisions=3, radius=dims["radius"])
+    m = trimesh.creation.cylinder(radius=dims["radius"], height=dims["height"], sections=48)
+    axis = str(UsdGeom.Cylinder(prim).GetAxisAttr().Get())
+    if axis in ("X", "Y"):
+        m.apply_transform(trimesh.geometry.align_vectors([0, 0, 1], [1, 0, 0] if axis == "X" else [0, 1, 0]))
+    return m
+
+
+def _mesh_piece(prim, M: np.ndarray, root_dir: Path, pb: Problems) -> _Piece | None:
+    """Read a UsdGeom.Mesh (or supported gprim) and place it with the (4, 4) transform ``M`` (rsart world)."""
+    from pxr import UsdGeom
+
+    pp = str(prim.GetPath())
+    imageable = UsdGeom.Imageable(prim)
+    renderable = imageable.ComputePurpose() in ("default", "render") and imageable.ComputeVisibility() != "invisible"
+    role = _custom(prim, "rsart:role")
+    role = role if role in ("geometry", "visual") else None
+    if not np.all(np.isfinite(M)):
+        pb.add(pp, "non-finite transform (NaN or inf)")
+        return None
+    flip = np.linalg.det(M[:3, :3]) < 0
+    if not prim.IsA(UsdGeom.Mesh):
+        m = _gprim_mesh(prim, pb)
+        if m is None:
+            return None
+        m = trimesh.Trimesh(m.vertices, m.faces, process=False)
+        m.apply_transform(M)
+        return _Piece(pp, role, renderable, m, None)
+    mesh = UsdGeom.Mesh(prim)
+    pts, counts, idx = (mesh.GetPointsAttr().Get(), mesh.GetFaceVertexCountsAttr().Get(),
+                        mesh.GetFaceVertexIndicesAttr().Get())
+    v = np.array(pts, dtype=np.float64).reshape(-1, 3) if pts is not None and len(pts) else np.zeros((0, 3))
+    counts = np.array(counts, dtype=np.int64) if counts is not None else np.zeros(0, np.int64)
+    idx = np.array(idx, dtype=np.int64) if idx is not None else np.zeros(0, np.int64)
+    if len(v) == 0:
+        pb.add(pp, "mesh has no points")
+        return None
+    if not np.all(np.isfinite(v)):
+        pb.add(pp, "mesh points contain NaN or inf")
+        return None
+    if len(counts) == 0:
+        pb.add(pp, "mesh has no faces")
+        return None
+    if np.any(counts < 3) or int(counts.sum()) != len(idx):
+        pb.add(pp, "faceVertexCounts must be >= 3 and sum to len(faceVertexIndices)")
+        return None
+    if np.any(idx < 0) or np.any(idx >= len(v)):
+        pb.add(pp, f"faceVertexIndices outside [0, {len(v) - 1}]")
+        return None
+    corners, face = _triangulate(counts, idx)
+    if str(mesh.GetOrientationAttr().Get()) == "leftHanded":
+        flip = not flip
+    if flip:
+        corners = corners[:, [0, 2, 1]]
+    vw = v @ M[:3, :3].T + M[:3, 3]
+    geom = trimesh.Trimesh(vw, idx[corners], process=False)
+    colors = _colors(prim, len(v), len(counts), face)
+    if colors:
+        geom.visual = trimesh.visual.ColorVisuals(geom, **colors)
+    visual = None
+    tex = _texture(prim, root_dir)
+    if tex is not None:
+        uv = _primvar(prim, tex[1])
+        ok = uv is not None and uv[0] is not None and uv[0].ndim == 2 and uv[0].shape[1] == 2 and np.all(np.isfinite(uv[0]))
+        if ok and uv[1] in ("vertex", "varying") and len(uv[0]) == len(v):
+            visual = trimesh.Trimesh(vw, idx[corners], process=False,
+                                     visual=trimesh.visual.TextureVisuals(uv=uv[0], image=tex[0]))
+        elif ok and uv[1] == "faceVarying" and len(uv[0]) == len(idx):
+            flat = corners.reshape(-1)
+            visual = trimesh.Trimesh(vw[idx[flat]], np.arange(len(flat)).reshape(-1, 3), process=False,
+                                     visual=trimesh.visual.TextureVisuals(uv=uv[0][flat], image=tex[0]))
+        else:
+            warnings.warn(f"{pp}: texture coordinates {tex[1]!r} missing or mismatched; kept untextured", stacklevel=2)
+    return _Piece(pp, role, renderable, geom, visual)
+
+
+def _concat(meshes: list[trimesh.Trimesh]) -> trimesh.Trimesh:
+    """One mesh of several (geometry only; a single mesh is returned as is, colours kept)."""
+    if len(meshes) == 1:
+        return meshes[0]
+    offs = np.cumsum([0] + [len(m.vertices) for m in meshes[:-1]])
+    return trimesh.Trimesh(np.vstack([m.vertices for m in meshes]),
+                           np.vstack([m.faces + o for m, o in zip(meshes, offs)]), process=False)
+
+
+def body_meshes(stage, members: list[str], bodies: set[str], C: np.ndarray, D: dict, world, root_dir: Path,
+                pb: Problems) -> tuple[trimesh.Trimesh | None, list[trimesh.Trimesh]]:
+    """(geometry, visuals) of a part made of ``members`` bodies, rsart world at rest. Problems name prims."""
+    from pxr import Usd, UsdGeom
+
+    pieces: list[_Piece] = []
+    seen = 0
+    for b in members:
+        top = stage.GetPrimAtPath(b)
+        it = iter(Usd.PrimRange(top, Usd.TraverseInstanceProxies()))
+        for p in it:
+            ps = str(p.GetPath())
+            if p != top and ps in bodies:
+                it.PruneChildren()
+                continue
+            if p.IsA(UsdGeom.Mesh) or p.IsA(UsdGeom.Cube) or p.IsA(UsdGeom.Sphere) or p.IsA(UsdGeom.Cylinder):
+                seen += 1
+                piece = _mesh_piece(p, C @ D[b] @ world(ps), root_dir, pb)
+                if piece is not None:
+                    pieces.append(piece)
+    if not pieces:
+        if not seen:
+            pb.add(members[0], "body has no mesh geometry (Mesh, Cube, Sphere or Cylinder prims below it)")
+        return None, []
+    if any(p.role for p in pieces):
+        geo = [p.geom for p in pieces if p.role == "geometry"] or [p.geom for p in pieces]
+        vis = [p.visual or p.geom for p in pieces if p.role == "visual"]
+        return _concat(geo), vis
+    chosen = [p for p in pieces if p.renderable] or pieces
+    vis = [p.visual or p.geom for p in chosen] if any(p.visual is not None for p in chosen) else []
+    return _concat([p.geom for p in chosen]), vis
+
+
+def read_usd(path: str | Path) -> Twin:
+    """See :func:`rsart.usd.read_usd`."""
+    from pxr import Tf
+
+    path = Path(path)
+    if not path.is_file():
+        raise RsartError(f"{path}: file not found")
+    try:
+        stage = _open_stage(path)
+        return _read_stage(stage, path)
+    except RsartError:
+        raise
+    except Tf.ErrorException as e:
+        msg = " ".join(str(e).split())[:300]
+        raise RsartError(f"{path}: USD error: {msg}") from None
+    except Exception as e:  # hostile input must never surface as a traceback
+        raise RsartError(f"{path}: cannot read USD ({type(e).__name__}: {e})") from None
+
