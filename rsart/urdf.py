@@ -146,7 +146,9 @@ def read_urdf(path: str | os.PathLike, *, use: str = "visual", load_meshes: bool
             pb.add(w, f"link {j.child!r} is the child of two joints")
         child_joint[j.child] = j
         children.setdefault(j.parent, []).append(j)
-        if not np.all(np.isfinite(j.origin)):
+        if j.origin is None:
+            j.origin = np.eye(4)
+        if not np.all(np.isfinite(np.asarray(j.origin, dtype=float))):
             pb.add(f"{w}.origin", "non-finite number")
         if j.type in MOVING:
             ax = np.asarray(j.axis if j.axis is not None else [1, 0, 0], dtype=float)
