@@ -98,13 +98,16 @@ def prepare_prediction(mesh: trimesh.Trimesh, cfg: ChamferConfig) -> trimesh.Tri
 
 
 def chamfer_mesh(pred: trimesh.Trimesh, gt: trimesh.Trimesh, cfg: ChamferConfig = ChamferConfig(),
-                 key: tuple = ()) -> float:
+                 key: tuple = (), filter_pred: bool | None = None) -> float:
     """Chamfer (×1000, squared units) between a predicted and a true mesh, averaged over ``cfg.seeds``.
 
     ``key`` (e.g. (object_id, part, state)) enters the seed derivation; pass the same key for the same
-    comparison to get the same samples. Raises ValueError when a mesh has no surface to sample.
+    comparison to get the same samples. ``filter_pred`` False skips the component filter (for a mesh
+    already passed through :func:`prepare_prediction`); None follows ``cfg``. Raises ValueError when a
+    mesh has no surface to sample.
     """
-    pred = prepare_prediction(pred, cfg)
+    if filter_pred is None or filter_pred:
+        pred = prepare_prediction(pred, cfg)
     for name, m in (("predicted", pred), ("ground-truth", gt)):
         if len(m.faces) == 0 or not mesh_area(m) > 0:
             raise ValueError(f"{name} mesh has no surface to sample (0 faces or zero area)")

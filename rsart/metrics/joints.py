@@ -3,7 +3,8 @@
 All inputs in the same frame (the object's world frame at the ``start`` state) and scene units;
 angles in radians in, degrees out (as the papers print them).
 
-* Axis Ang (°): ``degrees(arccos(clip(|cos|, 0, 1)))`` — sign-invariant, 0–90°, never NaN.
+* Axis Ang (°): ``degrees(arccos(clip(|cos|, 0, 1)))`` — sign-invariant, 0–90°, never NaN
+  (evaluated as ``atan2(|a×b|, |a·b|)``, the same value without arccos's rounding floor).
 * Axis Pos (×10 scene units): shortest distance between the two axis lines; point-to-line when
   ``|d1 × d2| < 1e-6`` (parallel). Revolute joints only (prismatic → ``None``).
 * Part Motion: revolute — geodesic angle (°) between ``Rot(a_pred, Δv_pred)`` and ``Rot(a, Δv)``;
@@ -49,9 +50,13 @@ def _unit(v) -> np.ndarray:
 
 
 def axis_angle_deg(a, b) -> float:
-    """Angle (°) between the *lines* spanned by ``a`` and ``b`` (any non-zero length): 0–90°."""
-    c = abs(float(np.dot(_unit(a), _unit(b))))
-    return math.degrees(math.acos(min(max(c, 0.0), 1.0)))
+    """Angle (°) between the *lines* spanned by ``a`` and ``b`` (any non-zero length): 0–90°.
+
+    Equals ``degrees(arccos(clip(|cos|, 0, 1)))``; computed as ``atan2(|a×b|, |a·b|)``, which has no
+    rounding floor near 0° (arccos of a cosine rounded to 1 − 1e-16 would report ~1e-6°).
+    """
+    ua, ub = _unit(a), _unit(b)
+    return math.degrees(math.atan2(float(np.linalg.norm(np.cross(ua, ub))), abs(float(np.dot(ua, ub)))))
 
 
 def line_distance(o1, d1, o2, d2) -> float:
@@ -75,9 +80,14 @@ def axis_position(o_pred, d_pred, o_true, d_true) -> float:
 
 
 def rotation_geodesic_deg(R1: np.ndarray, R2: np.ndarray) -> float:
-    """Geodesic angle (°) between rotations (3, 3): ``arccos(clip((tr(R1 R2ᵀ) − 1)/2, −1, 1))``."""
-    c = (float(np.trace(np.asarray(R1) @ np.asarray(R2).T)) - 1.0) / 2.0
-    return math.degrees(math.acos(min(max(c, -1.0), 1.0)))
+    """Geodesic angle (°) between rotations (3, 3): the angle of ``R1 R2ᵀ``.
+
+    Equals ``arccos(clip((tr(R1 R2ᵀ) − 1)/2, −1, 1))``; computed from the quaternion of ``R1 R2ᵀ``
+    (scipy, ``2·atan2(|q_xyz|, |q_w|)``), which stays exact near 0° where the trace form loses ~1e-6°.
+    """
+    from scipy.spatial.transform import Rotation
+
+    return math.degrees(float(Rotation.from_matrix(np.asarray(R1) @ np.asarray(R2).T).magnitude()))
 
 
 def part_motion(true_type: str, axis_pred, delta_pred: float, axis_true, delta_true: float) -> float:
