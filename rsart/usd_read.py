@@ -67,6 +67,8 @@ def _open_stage(path: Path):
     while todo:
         lay = todo.pop()
         for dep in lay.GetCompositionAssetDependencies():
+            if not dep:  # internal reference (same layer)
+                continue
             absdep = lay.ComputeAbsolutePath(dep)
             plain = Path(absdep.split("[", 1)[0]).resolve()
             if plain != root and root not in plain.parents:
