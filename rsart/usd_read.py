@@ -55,12 +55,23 @@ class _UsdJoint:
 
 
 # ----------------------------------------------------------------------------- opening
+def _fresh_layer(identifier: str):
+    """The layer at ``identifier`` as it is on disk now (USD caches open layers per process)."""
+    from pxr import Sdf
+
+    layer = Sdf.Layer.Find(identifier)
+    if layer is not None and not layer.dirty:
+        layer.Reload(True)
+        return layer
+    return layer if layer is not None else Sdf.Layer.FindOrOpen(identifier)
+
+
 def _open_stage(path: Path):
     """Open ``path`` after checking that every composed layer lies inside its folder."""
     from pxr import Sdf, Usd
 
     root = path.parent.resolve()
-    layer = Sdf.Layer.FindOrOpen(str(path))
+    layer = _fresh_layer(str(path))
     if layer is None:
         raise RsartError(f"{path}: not a readable USD file")
     seen, todo = {layer.identifier}, [layer]
@@ -76,7 +87,7 @@ def _open_stage(path: Path):
                                  "rsart reads only files inside the USD file's folder")
             if absdep not in seen and len(seen) < _MAX_LAYERS and plain.is_file():
                 seen.add(absdep)
-                sub = Sdf.Layer.FindOrOpen(absdep)
+                sub = _fresh_layer(absdep)
                 if sub is not None:
                     todo.append(sub)
     return Usd.Stage.Open(layer, Usd.Stage.LoadAll)
@@ -641,6 +652,13 @@ def body_meshes(stage, members: list[str], bodies: set[str], C: np.ndarray, D: d
     return _concat([p.geom for p in chosen]), vis
 
 
+def _tf_message(e: Exception) -> str:
+    """The human part of a Tf error (drops the C++ function/file prefix), at most 300 characters."""
+    text = " ".join(str(e).split())
+    m = re.search(r" : '(.*)'$", text)
+    return (m.group(1) if m else text)[:300]
+
+
 def read_usd(path: str | Path) -> Twin:
     """See :func:`rsart.usd.read_usd`."""
     from pxr import Tf
@@ -654,8 +672,7 @@ def read_usd(path: str | Path) -> Twin:
     except RsartError:
         raise
     except Tf.ErrorException as e:
-        msg = " ".join(str(e).split())[:300]
-        raise RsartError(f"{path}: USD error: {msg}") from None
+        raise RsartError(f"{path}: not a readable USD file: {_tf_message(e)}") from None
     except Exception as e:  # hostile input must never surface as a traceback
         raise RsartError(f"{path}: cannot read USD ({type(e).__name__}: {e})") from None
 
