@@ -333,12 +333,13 @@ def body_meshes(stage, members: list[str], bodies: set[str], C: np.ndarray, D: d
                 piece = _mesh_piece(p, C @ D[b] @ world(ps), root_dir, pb)
                 if piece is not None:
                     pieces.append(piece)
-    if not pieces:
-        if not seen:
-            pb.add(members[0], "body has no mesh geometry (Mesh, Cube, Sphere or Cylinder prims below it)")
+    if len(pieces) < seen:  # some geometry prims were invalid (problems recorded)
         return None, []
+    empty = trimesh.Trimesh(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64), process=False)
+    if not pieces:  # a body without geometry (a helper link): an empty part
+        return empty, []
     if any(p.role for p in pieces):
-        geo = [p.geom for p in pieces if p.role == "geometry"] or [p.geom for p in pieces]
+        geo = [p.geom for p in pieces if p.role == "geometry"] or [empty]
         vis = [p.visual or p.geom for p in pieces if p.role == "visual"]
         return _concat(geo), vis
     chosen = [p for p in pieces if p.renderable] or pieces

@@ -144,27 +144,30 @@ def _write_part(stage, root: str, part: TwinPart, pname: str, usd_dir: Path, tex
     from pxr import Gf, Sdf, UsdGeom, UsdPhysics, UsdShade, Vt
 
     verts = np.asarray(part.mesh.vertices, dtype=np.float64)
-    if len(verts) == 0 or len(part.mesh.faces) == 0:
-        raise RsartError(f"part {part.name!r}: empty mesh, nothing to write")
-    centre = 0.5 * (verts.min(0) + verts.max(0))
+    empty = len(verts) == 0 or len(part.mesh.faces) == 0  # e.g. a URDF helper link: a body without geometry
+    allv = verts if not empty else np.concatenate([np.zeros((0, 3))] + [np.asarray(v.vertices) for v in part.visuals])
+    centre = 0.5 * (allv.min(0) + allv.max(0)) if len(allv) else np.zeros(3)
     xf = UsdGeom.Xform.Define(stage, f"{root}/{pname}")
     xf.AddTranslateOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Vec3d(*centre.tolist()))
     prim = xf.GetPrim()
     prim.CreateAttribute("rsart:name", Sdf.ValueTypeNames.String, custom=True).Set(part.name)
     UsdPhysics.RigidBodyAPI.Apply(prim)
 
-    geom = _mesh_prim(stage, f"{root}/{pname}/geometry", verts - centre, part.mesh.faces)
-    _set_role(geom.GetPrim(), "geometry")
-    UsdPhysics.CollisionAPI.Apply(geom.GetPrim())
-    UsdPhysics.MeshCollisionAPI.Apply(geom.GetPrim()).CreateApproximationAttr("convexDecomposition")
-    if part.visuals:
-        geom.CreatePurposeAttr("guide")
-    elif (c := _colors(part.mesh)) is not None:
-        _write_colors(geom, c)
+    if not empty:
+        geom = _mesh_prim(stage, f"{root}/{pname}/geometry", verts - centre, part.mesh.faces)
+        _set_role(geom.GetPrim(), "geometry")
+        UsdPhysics.CollisionAPI.Apply(geom.GetPrim())
+        UsdPhysics.MeshCollisionAPI.Apply(geom.GetPrim()).CreateApproximationAttr("convexDecomposition")
+        if part.visuals:
+            geom.CreatePurposeAttr("guide")
+        elif (c := _colors(part.mesh)) is not None:
+            _write_colors(geom, c)
 
     if part.visuals:
         UsdGeom.Scope.Define(stage, f"{root}/{pname}/visuals")
     for k, vm in enumerate(part.visuals):
+        if len(vm.vertices) == 0 or len(vm.faces) == 0:
+            continue
         vpath = f"{root}/{pname}/visuals/visual_{k}"
         vmesh = _mesh_prim(stage, vpath, np.asarray(vm.vertices, dtype=np.float64) - centre, vm.faces)
         _set_role(vmesh.GetPrim(), "visual")

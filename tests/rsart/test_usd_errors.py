@@ -130,12 +130,19 @@ def test_face_index_out_of_range(tmp_path):
     _fails(tmp_path, text, "/o/lid/m: faceVertexIndices outside [0, 3]")
 
 
-def test_body_without_geometry(tmp_path):
+def test_body_without_geometry_is_an_empty_part(tmp_path):
+    """Not an error: helper links (e.g. a URDF screw joint's helper) are bodies without geometry."""
     text = GOOD.replace('def Mesh "m"\n        {\n            point3f[] points = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)]\n'
                         '            int[] faceVertexCounts = [4]\n            int[] faceVertexIndices = [0, 1, 2, 3]\n        }\n',
                         "", 1)
     assert text != GOOD
-    _fails(tmp_path, text, "/o/base: body has no mesh geometry")
+    t = _read(tmp_path, text)
+    assert len(t.parts[0].mesh.vertices) == 0 and len(t.parts[1].mesh.faces) == 2
+
+
+def test_invalid_face_counts(tmp_path):
+    text = GOOD.replace(LID_MESH, LID_MESH.replace("faceVertexCounts = [4]", "faceVertexCounts = [2, 2]"))
+    _fails(tmp_path, text, "/o/lid/m: faceVertexCounts must be >= 3 and sum to len(faceVertexIndices)")
 
 
 def test_two_roots(tmp_path):

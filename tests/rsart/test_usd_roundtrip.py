@@ -220,3 +220,20 @@ def test_write_object_usd_matches_twin(tmp_path):
     back = read_usd(tmp_path / "box-0000" / "twin" / "object.usda")
     _assert_same_structure(twin, back, tol=1e-12)
     assert_same_posed(twin, back)
+
+
+def test_part_without_geometry_roundtrips(tmp_path):
+    """A helper part with an empty mesh (as URDF helper links give) survives the round trip."""
+    base = _box([0.2, 0.2, 0.2], [0, 0, 0.1])
+    cap = trimesh.creation.cylinder(radius=0.05, height=0.04, sections=12)
+    cap.apply_translation([0, 0, 0.22])
+    empty = trimesh.Trimesh(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64))
+    twin = Twin("bottle", [TwinPart(0, "base", base), TwinPart(1, "helper", empty), TwinPart(2, "cap", cap)],
+                [Joint("lift", "prismatic", 0, 1, np.array([0, 0, 1.0]), np.zeros(3), (0.0, 0.05)),
+                 Joint("twist", "revolute", 1, 2, np.array([0, 0, 1.0]), np.array([0, 0, 0.2]), None)])
+    write_usd(twin, tmp_path / "b.usda")
+    back = read_usd(tmp_path / "b.usda")
+    assert [p.name for p in back.parts] == ["base", "helper", "cap"]
+    assert len(back.parts[1].mesh.vertices) == 0
+    q = {"lift": 0.03, "twist": 2.0}
+    assert np.abs(back.posed_meshes(q)[2].vertices - twin.posed_meshes(q)[2].vertices).max() < 1e-7
