@@ -32,7 +32,7 @@ class RayHits:
     ``primitive``: int64 triangle index within that geometry (-1 = none);
     ``bary``: float32 (H, W, 2) open3d barycentrics (u, v): hit = (1-u-v)·v0 + u·v1 + v·v2;
     ``normal``: float32 (H, W, 3) unit world-frame geometric normal of the hit triangle (as wound);
-    ``ray_dir``: float64 (H, W, 3) world-frame ray directions (camera z = 1).
+    ``ray_dir``: float32 (H, W, 3) world-frame ray directions (camera z = 1).
     """
 
     depth: np.ndarray
@@ -62,6 +62,26 @@ class RayHits:
         d = self.ray_dir / np.linalg.norm(self.ray_dir, axis=-1, keepdims=True)
         c = np.abs(np.sum(d * self.normal, axis=-1))
         return np.where(self.hit, c, 0).astype(np.float32)
+
+
+_DIR_CACHE: dict[tuple, np.ndarray] = {}
+
+
+def pixel_rays(camera: Camera) -> np.ndarray:
+    """(H, W, 3) float32 world-frame directions of :meth:`Camera.rays` (camera z = 1).
+
+    Same rays as ``Camera.rays()``, computed from a cached camera-frame grid per intrinsics
+    (a 640x480 grid costs ~25 ms to rebuild in float64; the rotation alone costs ~2 ms).
+    """
+    K = camera.intrinsics
+    key = (K.width, K.height, K.fx, K.fy, K.cx, K.cy)
+    d_cam = _DIR_CACHE.get(key)
+    if d_cam is None:
+        u, v = np.meshgrid(np.arange(K.width, dtype=np.float64), np.arange(K.height, dtype=np.float64))
+        d_cam = np.stack([(u - K.cx) / K.fx, (v - K.cy) / K.fy, np.ones_like(u)], axis=-1).astype(np.float32)
+        _DIR_CACHE.clear()
+        _DIR_CACHE[key] = d_cam
+    return d_cam @ camera.c2w[:3, :3].T.astype(np.float32)
 
 
 class RaycastScene:
@@ -94,10 +114,12 @@ class RaycastScene:
         return np.asarray(self._labels, dtype=np.int32)
 
     def cast(self, camera: Camera) -> RayHits:
-        """Cast one ray through every pixel centre of ``camera``."""
-        o, d = camera.rays()
-        rays = np.concatenate([o, d], axis=-1).astype(np.float32)
-        out = self._scene.cast_rays(o3d.core.Tensor(rays), nthreads=self.nthreads)
+        """Cast one ray through every pixel centre of ``camera`` (the rays of :meth:`Camera.rays`)."""
+        d = pixel_rays(camera)
+        rays = np.empty(d.shape[:2] + (6,), dtype=np.float32)
+        rays[..., :3] = camera.c2w[:3, 3]
+        rays[..., 3:] = d
+        out = self._scene.cast_rays(o3d.core.Tensor.from_numpy(rays), nthreads=self.nthreads)
         t = out["t_hit"].numpy()
         gid = out["geometry_ids"].numpy().astype(np.int64)
         invalid = gid == int(o3d.t.geometry.RaycastingScene.INVALID_ID)

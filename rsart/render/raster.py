@@ -1,0 +1,263 @@
+"""RGB images of a posed twin: pyrender (EGL or OSMesa) when GL works, else open3d ray-cast shading.
+
+Pixel convention: both backends sample the scene at pixel centres of the OpenCV camera
+(:mod:`rsart.camera`: u = 0 is the centre of the first pixel). OpenGL puts pixel centres at
+window coordinates i + 0.5, so the pyrender camera gets cx + 0.5, cy + 0.5. With
+``antialias=False`` (default) the rasteriser takes one sample per pixel centre, so the RGB
+silhouette equals the ray-cast mask pixel for pixel; ``antialias=True`` keeps pyrender's 4x
+MSAA (realistic blended edges, silhouette within one pixel of the mask).
+
+Backend choice (:func:`gl_platform`): ``$PYOPENGL_PLATFORM`` if set and working, else EGL,
+else OSMesa, each probed once in a subprocess (the result is cached in ``$RSART_GL_PLATFORM``
+so worker processes inherit it); with no working GL, :class:`RaycastShader` shades the
+ray-cast hits (face normals + texture/vertex/face colours through barycentrics).
+"""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from dataclasses import dataclass
+
+import numpy as np
+import trimesh
+
+from ..camera import Camera
+from .raycast import RayHits
+
+GL_PLATFORMS = ("egl", "osmesa")
+_PROBE = ("import pyrender; r = pyrender.OffscreenRenderer(8, 8); import trimesh; "
+          "s = pyrender.Scene(); s.add(pyrender.Mesh.from_trimesh(trimesh.creation.box())); "
+          "s.add(pyrender.IntrinsicsCamera(8, 8, 4, 4), pose=__import__('numpy').eye(4)); r.render(s); r.delete()")
+
+
+@dataclass(frozen=True)
+class Lighting:
+    """Uniform ambient light (booth) plus a weak light at the camera (hand-held capture), both white."""
+
+    ambient: float = 0.3
+    headlight: float = 1.8
+
+
+def _probe(platform: str) -> bool:
+    env = dict(os.environ, PYOPENGL_PLATFORM=platform, MUJOCO_GL=platform)
+    try:
+        r = subprocess.run([sys.executable, "-c", _PROBE], env=env, capture_output=True, timeout=60)
+    except (OSError, subprocess.TimeoutExpired):
+        return False
+    return r.returncode == 0
+
+
+def gl_platform() -> str | None:
+    """The working headless GL platform ("egl" | "osmesa"), or None when no GL works here (cached)."""
+    cached = os.environ.get("RSART_GL_PLATFORM")
+    if cached is not None:
+        return cached or None
+    order = list(GL_PLATFORMS)
+    pre = os.environ.get("PYOPENGL_PLATFORM")
+    if pre in order:
+        order.remove(pre)
+        order.insert(0, pre)
+    found = next((p for p in order if _probe(p)), None)
+    os.environ["RSART_GL_PLATFORM"] = found or ""
+    return found
+
+
+def resolve_backend(backend: str = "auto") -> str:
+    """"pyrender-egl" | "pyrender-osmesa" | "raycast" for a requested backend "auto" | "pyrender" | "raycast"."""
+    if backend == "raycast":
+        return "raycast"
+    plat = gl_platform()
+    if plat is None:
+        if backend == "pyrender":
+            from ..errors import RsartError
+            raise RsartError("no headless OpenGL (EGL or OSMesa) works here; use --rgb-backend raycast")
+        return "raycast"
+    return f"pyrender-{plat}"
+
+
+def srgb_to_linear(x: np.ndarray) -> np.ndarray:
+    """sRGB-encoded values in [0, 1] -> linear light (IEC 61966-2-1)."""
+    x = np.asarray(x, dtype=np.float64)
+    return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4)
+
+
+def linear_to_srgb(x: np.ndarray) -> np.ndarray:
+    """Linear light in [0, 1] -> sRGB-encoded values."""
+    x = np.clip(np.asarray(x, dtype=np.float64), 0, 1)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055)
+
+
+def _linear_colours(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
+    """A copy of a face/vertex-coloured mesh with colours in linear light: pyrender shades vertex colours
+    as linear values (textures it decodes from sRGB itself), then encodes its output as sRGB."""
+    kind = getattr(mesh.visual, "kind", None)
+    if kind not in ("face", "vertex"):
+        return mesh
+    out = trimesh.Trimesh(mesh.vertices, mesh.faces, process=False)
+    if kind == "face":
+        c = np.asarray(mesh.visual.face_colors, dtype=np.float64) / 255.0
+        c[:, :3] = srgb_to_linear(c[:, :3])
+        out.visual.face_colors = np.round(c * 255).astype(np.uint8)
+    else:
+        c = np.asarray(mesh.visual.vertex_colors, dtype=np.float64) / 255.0
+        c[:, :3] = srgb_to_linear(c[:, :3])
+        out.visual.vertex_colors = np.round(c * 255).astype(np.uint8)
+    return out
+
+
+# ----------------------------------------------------------------------------- pyrender
+def _disable_msaa(pyrender_renderer_module) -> None:
+    """Make pyrender sample once per pixel centre: it enables GL_MULTISAMPLE on every pass and has no
+    option against it, so its module-level ``glEnable`` is wrapped to ignore that one capability."""
+    from OpenGL import GL
+
+    mod = pyrender_renderer_module
+    if getattr(mod, "_rsart_msaa_wrapped", False):
+        return
+    original = mod.glEnable
+
+    def gl_enable(cap):
+        if cap == GL.GL_MULTISAMPLE and not getattr(mod, "_rsart_antialias", True):
+            GL.glDisable(GL.GL_MULTISAMPLE)
+            return None
+        return original(cap)
+
+    mod.glEnable = gl_enable
+    mod._rsart_msaa_wrapped = True
+
+
+class PyrenderRgb:
+    """Rasterised RGB of a static mesh set with pyrender; one OpenGL context per instance."""
+
+    def __init__(self, width: int, height: int, platform: str, lighting: Lighting = Lighting(),
+                 antialias: bool = False) -> None:
+        os.environ.setdefault("PYOPENGL_PLATFORM", platform)
+        os.environ.setdefault("MUJOCO_GL", platform)
+        import pyrender
+        import pyrender.renderer
+
+        _disable_msaa(pyrender.renderer)
+        pyrender.renderer._rsart_antialias = antialias
+        self._pr = pyrender
+        self._module = pyrender.renderer
+        self.name = f"pyrender-{os.environ['PYOPENGL_PLATFORM']}"
+        self.width, self.height = width, height
+        self.lighting = lighting
+        self.antialias = antialias
+        self._renderer = pyrender.OffscreenRenderer(width, height)
+        self._scene = None
+
+    def set_scene(self, meshes: list[trimesh.Trimesh], extent: float) -> None:
+        """Upload world-frame meshes (with their colours/textures); ``extent`` bounds the scene size (for clipping)."""
+        pr = self._pr
+        a = self.lighting.ambient
+        scene = pr.Scene(bg_color=[0.0, 0.0, 0.0, 0.0], ambient_light=[a, a, a])
+        for m in meshes:
+            scene.add(pr.Mesh.from_trimesh(_linear_colours(m), smooth=False))
+        self._cam = pr.IntrinsicsCamera(1, 1, 0, 0, znear=max(1e-3, 1e-4 * extent), zfar=10 * extent)
+        self._cam_node = scene.add(self._cam, pose=np.eye(4))
+        self._light_node = scene.add(pr.DirectionalLight(color=np.ones(3), intensity=self.lighting.headlight),
+                                     pose=np.eye(4))
+        self._scene = scene
+
+    def render(self, camera: Camera) -> tuple[np.ndarray, np.ndarray | None]:
+        """(H, W, 3) uint8 RGB premultiplied over black and (H, W) float32 coverage in [0, 1]
+        (None when the platform cannot read alpha back; the caller then uses the ray-cast coverage)."""
+        K = camera.intrinsics
+        if (K.width, K.height) != (self.width, self.height):
+            raise ValueError(f"renderer is {self.width}x{self.height}, camera is {K.width}x{K.height}")
+        self._cam.fx, self._cam.fy = K.fx, K.fy
+        self._cam.cx, self._cam.cy = K.cx + 0.5, K.cy + 0.5  # OpenGL pixel centres are at i + 0.5
+        pose = camera.c2w_opengl()
+        self._scene.set_pose(self._cam_node, pose)
+        self._scene.set_pose(self._light_node, pose)
+        self._module._rsart_antialias = self.antialias
+        flags = self._pr.RenderFlags.RGBA | self._pr.RenderFlags.SKIP_CULL_FACES
+        colour, _ = self._renderer.render(self._scene, flags=flags)
+        if colour.shape[-1] < 4:  # pyrender's OSMesa path reads back RGB only: no coverage available
+            return np.ascontiguousarray(colour[..., :3]), None
+        return np.ascontiguousarray(colour[..., :3]), colour[..., 3].astype(np.float32) / 255.0
+
+    def close(self) -> None:
+        self._renderer.delete()
+
+
+# ----------------------------------------------------------------------------- ray-cast shading
+@dataclass
+class Albedo:
+    """Base colour of one mesh in [0, 1]: per-face, per-vertex, or a texture through per-vertex UVs."""
+
+    faces: np.ndarray
+    face_colour: np.ndarray | None = None
+    vertex_colour: np.ndarray | None = None
+    uv: np.ndarray | None = None
+    texture: np.ndarray | None = None
+    factor: np.ndarray | None = None
+
+    @staticmethod
+    def of(mesh: trimesh.Trimesh) -> "Albedo":
+        vis = mesh.visual
+        faces = np.asarray(mesh.faces)
+        if getattr(vis, "kind", None) == "texture" and getattr(vis, "uv", None) is not None:
+            mat = vis.material
+            img = getattr(mat, "image", None) or getattr(mat, "baseColorTexture", None)
+            factor = getattr(mat, "baseColorFactor", None)
+            if factor is None:
+                factor = getattr(mat, "diffuse", None)
+            f = np.ones(3) if factor is None else np.asarray(factor, dtype=np.float64)[:3] / (
+                255.0 if np.asarray(factor).dtype == np.uint8 or np.max(factor) > 1 else 1.0)
+            if img is not None:
+                tex = np.asarray(img.convert("RGB"), dtype=np.uint8)
+                return Albedo(faces, uv=np.asarray(vis.uv, dtype=np.float64), texture=tex, factor=f)
+            return Albedo(faces, face_colour=np.tile(f, (len(faces), 1)))
+        if getattr(vis, "kind", None) == "vertex":
+            return Albedo(faces, vertex_colour=np.asarray(vis.vertex_colors)[:, :3] / 255.0)
+        if getattr(vis, "kind", None) == "face":
+            return Albedo(faces, face_colour=np.asarray(vis.face_colors)[:, :3] / 255.0)
+        return Albedo(faces, face_colour=np.full((len(faces), 3), 0.7))
+
+    def sample(self, prim: np.ndarray, bary: np.ndarray) -> np.ndarray:
+        """(N, 3) colours at hits on triangles ``prim`` (N,) with open3d barycentrics ``bary`` (N, 2)."""
+        if self.face_colour is not None:
+            return self.face_colour[prim]
+        w = np.stack([1 - bary[:, 0] - bary[:, 1], bary[:, 0], bary[:, 1]], axis=1)[..., None]
+        tri = self.faces[prim]
+        if self.vertex_colour is not None:
+            return np.sum(self.vertex_colour[tri] * w, axis=1)
+        uv = np.sum(self.uv[tri] * w, axis=1) % 1.0
+        h, wd = self.texture.shape[:2]
+        col = np.clip(np.round(uv[:, 0] * wd - 0.5), 0, wd - 1).astype(int)
+        row = np.clip(np.round((1 - uv[:, 1]) * h - 0.5), 0, h - 1).astype(int)  # UV v=0 is the image bottom
+        return self.texture[row, col] / 255.0 * self.factor
+
+
+class RaycastShader:
+    """RGB without GL: Lambert shading (ambient + headlight) of ray-cast hits; meshes in scene geometry order."""
+
+    name = "raycast"
+
+    def __init__(self, lighting: Lighting = Lighting()) -> None:
+        self.lighting = lighting
+        self._albedo: list[Albedo] = []
+
+    def set_scene(self, meshes: list[trimesh.Trimesh]) -> None:
+        """``meshes`` in the same order as the geometries of the :class:`RaycastScene` whose hits are shaded."""
+        self._albedo = [Albedo.of(m) for m in meshes]
+
+    def shade(self, hits: RayHits) -> tuple[np.ndarray, np.ndarray]:
+        """(H, W, 3) uint8 RGB premultiplied over black and (H, W) float32 coverage (0 or 1)."""
+        H, W = hits.depth.shape
+        rgb = np.zeros((H, W, 3), dtype=np.float64)
+        hit = hits.hit
+        base = np.zeros((int(hit.sum()), 3))
+        g, p, b = hits.geometry[hit], hits.primitive[hit], hits.bary[hit]
+        for gi in np.unique(g):
+            sel = g == gi
+            base[sel] = self._albedo[gi].sample(p[sel], b[sel])
+        # shaded in linear light like pyrender (diffuse BRDF albedo/pi times the light intensity), sRGB output
+        lam = self.lighting.ambient + self.lighting.headlight / np.pi * hits.cos_incidence()[hit]
+        rgb[hit] = srgb_to_linear(base) * lam[:, None]
+        out = np.clip(np.round(linear_to_srgb(rgb) * 255), 0, 255).astype(np.uint8)
+        out[~hit] = 0
+        return out, hit.astype(np.float32)

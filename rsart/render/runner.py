@@ -1,0 +1,292 @@
+"""Render object folders: plan views, write cameras.json, render in worker processes, resume.
+
+Layout written under a dataset root ``out`` (DESIGN.md §6.1)::
+
+    out/index.json, out/checksums.sha256
+    out/<object_id>/meta.json               (+ states the protocol added, e.g. unseen ones)
+    out/<object_id>/render.json             the settings of this render (protocol, seed, options)
+    out/<object_id>/twin/...                copied from the input object folder / written from URDF/USD
+    out/<object_id>/states/<sid>/cameras.json
+    out/<object_id>/states/<sid>/{rgb,depth,mask}/<view>.png   (+ rgb_clean/, depth_clean/ with --sensor)
+
+Resume: every image is written atomically (temp file + rename), so a view is finished exactly when
+all its files exist; a re-run with the same settings renders only unfinished views and, because
+every random draw is seeded by (seed, object, state, view), produces the same bytes as an
+uninterrupted run. A re-run with different settings is refused (``render.json`` differs).
+"""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import zlib
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import RsartError
+from ..format import (CamerasFile, DatasetIndex, ObjectMeta, ViewRecord, cameras_to_dict, read_index, read_meta,
+                      write_cameras, write_index, write_meta)
+from ..io import dumps_json, read_json, write_depth_png, write_json, write_mask_png, write_png_rgb
+from ..kinematics import Twin
+from .frame import RenderOptions
+from .paths import PathSpec, circular_path, fit_radius, fixed_test_views, random_views
+from .protocols import ProtocolPlan, plan_protocol
+
+RENDER_FORMAT = "rsart-render/1"
+MANIFEST = "render.json"
+
+
+@dataclass(frozen=True)
+class RenderJob:
+    """Everything that determines the rendered bytes (recorded in ``render.json``)."""
+
+    protocol: str = "pd2gs"
+    seed: int = 0
+    views: int | None = None
+    test_views: int | None = None
+    train_path: str = "circle"
+    options: RenderOptions = RenderOptions()
+    path: PathSpec = PathSpec()
+
+    def manifest(self) -> dict:
+        return {"format": RENDER_FORMAT, "protocol": self.protocol, "seed": self.seed, "views": self.views,
+                "test_views": self.test_views, "train_path": self.train_path,
+                "options": self.options.to_dict(), "path": asdict(self.path)}
+
+
+@dataclass
+class ViewTask:
+    """One state's views to render in one worker call (``views``: (id, c2w (4, 4)) pairs)."""
+
+    obj_dir: str
+    object_id: str
+    state_id: str
+    values: dict[str, float]
+    bounds: np.ndarray
+    radius: float
+    views: list[tuple[str, np.ndarray]]
+    job: RenderJob
+    twin: Twin | None = field(default=None, repr=False)
+
+
+@dataclass
+class ObjectPlan:
+    """The planned render of one object folder."""
+
+    obj_dir: Path
+    meta: ObjectMeta
+    protocol: ProtocolPlan
+    cameras: dict[str, CamerasFile]
+    bounds: np.ndarray
+    radius: float
+
+
+def stable_seed(*parts: object) -> np.random.SeedSequence:
+    """A seed sequence from ints and strings (CRC32 of strings: stable across runs, unlike ``hash``)."""
+    ints = [p if isinstance(p, int) else zlib.crc32(str(p).encode()) for p in parts]
+    return np.random.SeedSequence(ints)
+
+
+def view_files(state_dir: Path, view_id: str, sensor: bool) -> list[Path]:
+    """The files of one finished view."""
+    kinds = ["rgb", "depth", "mask"] + (["rgb_clean", "depth_clean"] if sensor else [])
+    return [state_dir / k / f"{view_id}.png" for k in kinds]
+
+
+# ----------------------------------------------------------------------------- planning
+def plan_object(obj_dir: Path, twin: Twin, meta: ObjectMeta, job: RenderJob) -> ObjectPlan:
+    """States, camera poses and booth placement of ``meta``'s object under ``job`` (deterministic)."""
+    proto = plan_protocol(job.protocol, meta, job.views, job.test_views)
+    K = job.options.intrinsics
+    bounds = np.array([np.full(3, np.inf), np.full(3, -np.inf)])
+    for sp in proto.states:
+        b = twin.bounds(sp.state.values)
+        bounds = np.array([np.minimum(bounds[0], b[0]), np.maximum(bounds[1], b[1])])
+    radius = fit_radius(bounds, K, job.path.fill)
+    target = bounds.mean(axis=0)
+    test = fixed_test_views(target, radius, max(sp.n_test for sp in proto.states), job.path)
+    cameras = {}
+    for sp in proto.states:
+        rng = np.random.default_rng(stable_seed(job.seed, meta.object_id, sp.state.id, "path"))
+        if job.train_path == "circle":
+            train = circular_path(target, radius, sp.n_train, rng, job.path)
+        elif job.train_path == "random":
+            train = random_views(target, radius, sp.n_train, rng, job.path)
+        else:
+            raise RsartError(f"train path {job.train_path!r} is not 'circle' or 'random'")
+        views = [ViewRecord(f"{i:04d}", c, "train") for i, c in enumerate(train)]
+        views += [ViewRecord(f"{sp.n_train + i:04d}", test[i], "test") for i in range(sp.n_test)]
+        cameras[sp.state.id] = CamerasFile(K, job.options.depth_scale, views,
+                                           extra={"protocol": job.protocol, "state": sp.state.id})
+    return ObjectPlan(obj_dir, meta, proto, cameras, bounds, radius)
+
+
+def write_plan(plan: ObjectPlan, job: RenderJob, overwrite: bool = False) -> None:
+    """Write meta.json (with added states), render.json and every cameras.json; refuse mismatched settings."""
+    obj = plan.obj_dir
+    manifest = job.manifest()
+    mpath = obj / MANIFEST
+    if mpath.exists():
+        old = read_json(mpath)
+        if old != manifest:
+            if not overwrite:
+                diff = sorted(k for k in set(old) | set(manifest) if old.get(k) != manifest.get(k))
+                raise RsartError(f"{obj}: already rendered with other settings (differs in {', '.join(diff)}); "
+                                 f"use another --out or pass --overwrite")
+            shutil.rmtree(obj / "states", ignore_errors=True)
+    meta = plan.meta
+    if plan.protocol.new_states:
+        known = {s.id for s in meta.states}
+        meta.states = list(meta.states) + [s for s in plan.protocol.new_states if s.id not in known]
+        write_meta(meta, obj / "meta.json")
+    for sid, cams in plan.cameras.items():
+        sdir = obj / "states" / sid
+        sdir.mkdir(parents=True, exist_ok=True)
+        for tmp in sdir.glob("*/.*.tmp"):  # leftovers of a killed run (never a real output file)
+            tmp.unlink(missing_ok=True)
+        cpath = sdir / "cameras.json"
+        if not cpath.exists() or read_json(cpath) != json.loads(dumps_json(cameras_to_dict(cams))):
+            write_cameras(cams, cpath)
+    write_json(mpath, manifest)
+
+
+def pending_tasks(plan: ObjectPlan, twin: Twin, job: RenderJob, chunk: int = 8) -> list[ViewTask]:
+    """Unfinished views, grouped by state into chunks of at most ``chunk`` views."""
+    tasks = []
+    for sp in plan.protocol.states:
+        sdir = plan.obj_dir / "states" / sp.state.id
+        todo = [(v.id, v.c2w) for v in plan.cameras[sp.state.id].views
+                if not all(f.exists() for f in view_files(sdir, v.id, job.options.sensor))]
+        for i in range(0, len(todo), chunk):
+            tasks.append(ViewTask(str(plan.obj_dir), plan.meta.object_id, sp.state.id, dict(sp.state.values),
+                                  plan.bounds, plan.radius, todo[i:i + chunk], job, twin))
+    return tasks
+
+
+# ----------------------------------------------------------------------------- rendering (runs in workers)
+_WORKER: dict = {"key": None, "renderer": None, "raster": None, "nthreads": 0}
+
+
+def init_worker(nthreads: int) -> None:
+    """Per-process setup: ray-casting threads (0 = all cores)."""
+    _WORKER["nthreads"] = nthreads
+
+
+def render_task(task: ViewTask) -> int:
+    """Render and write the views of ``task``; returns the number of views written."""
+    from .frame import StateRenderer
+
+    job = task.job
+    key = (task.obj_dir, task.state_id, repr(job.options))
+    if _WORKER["key"] != key:
+        raster = _WORKER["raster"]
+        K, opt = job.options.intrinsics, job.options
+        if raster is not None and (raster.width, raster.height, raster.antialias, raster.lighting) != (
+                K.width, K.height, opt.antialias, opt.lighting):
+            raster.close()
+            raster = None
+        sr = StateRenderer(task.twin, task.values, job.options, task.bounds, task.radius,
+                           nthreads=_WORKER["nthreads"], rgb_renderer=raster)
+        if raster is not None and sr.raster is None:
+            raster.close()
+        _WORKER.update(key=key, renderer=sr, raster=sr.raster)
+    sr = _WORKER["renderer"]
+    sdir = Path(task.obj_dir) / "states" / task.state_id
+    for vid, c2w in task.views:
+        rng = np.random.default_rng(stable_seed(job.seed, task.object_id, task.state_id, vid, "view"))
+        f = sr.render(c2w, rng)
+        scale = job.options.depth_scale
+        if job.options.sensor:
+            write_png_rgb(sdir / "rgb_clean" / f"{vid}.png", f.rgb_clean)
+            write_depth_png(sdir / "depth_clean" / f"{vid}.png", f.depth_clean, scale)
+        write_mask_png(sdir / "mask" / f"{vid}.png", f.mask)
+        write_depth_png(sdir / "depth" / f"{vid}.png", f.depth, scale)
+        write_png_rgb(sdir / "rgb" / f"{vid}.png", f.rgb)
+    return len(task.views)
+
+
+def run_tasks(tasks: list[ViewTask], workers: int = 1, backend: str = "process", address: str | None = None,
+              progress: bool = True, desc: str = "render") -> int:
+    """Run ``tasks`` in this process (workers=1), a process pool, or on Ray; returns views written."""
+    from tqdm import tqdm
+
+    total = sum(len(t.views) for t in tasks)
+    bar = tqdm(total=total, desc=desc, unit="view", disable=not progress or total == 0)
+    done = 0
+    try:
+        if backend == "ray":
+            from .ray_backend import run_on_ray
+            for n in run_on_ray(tasks, address=address, workers=workers):
+                done += n
+                bar.update(n)
+        elif workers <= 1 or len(tasks) <= 1:
+            init_worker(0)
+            for t in tasks:
+                n = render_task(t)
+                done += n
+                bar.update(n)
+        else:
+            import concurrent.futures as cf
+            import multiprocessing as mp
+
+            ctx = mp.get_context("spawn")  # fresh interpreters: no forked GL/open3d state
+            with cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=init_worker,
+                                        initargs=(1,)) as ex:
+                futs = [ex.submit(render_task, t) for t in tasks]
+                try:
+                    for fu in cf.as_completed(futs):
+                        n = fu.result()
+                        done += n
+                        bar.update(n)
+                except BaseException:
+                    for fu in futs:
+                        fu.cancel()
+                    raise
+    finally:
+        bar.close()
+    return done
+
+
+# ----------------------------------------------------------------------------- objects and datasets
+def default_workers() -> int:
+    return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
+
+
+def render_object_dir(obj_dir: Path, job: RenderJob, workers: int | None = None, backend: str = "process",
+                      address: str | None = None, progress: bool = True, overwrite: bool = False,
+                      twin: Twin | None = None) -> ObjectPlan:
+    """Render the states of an existing object folder in place (meta.json + twin/ already there)."""
+    from ..twin_io import read_twin
+
+    obj_dir = Path(obj_dir)
+    meta = read_meta(obj_dir)
+    twin = twin or read_twin(obj_dir, meta)
+    plan = plan_object(obj_dir, twin, meta, job)
+    write_plan(plan, job, overwrite=overwrite)
+    tasks = pending_tasks(plan, twin, job)
+    run_tasks(tasks, workers or default_workers(), backend, address, progress, desc=meta.object_id)
+    return plan
+
+
+def update_index(root: Path, object_ids: list[str], name: str | None = None) -> None:
+    """Create or extend ``root/index.json`` with ``object_ids`` (split "all" lists every object)."""
+    path = root / "index.json"
+    if path.exists():
+        idx = read_index(path)
+        objs = idx.objects + [o for o in object_ids if o not in idx.objects]
+        splits = dict(idx.splits)
+        splits["all"] = list(objs)
+        idx = DatasetIndex(idx.name, idx.version, objs, splits, idx.format, idx.extra)
+    else:
+        idx = DatasetIndex(name or root.name or "rsart", "1", list(object_ids), {"all": list(object_ids)})
+    write_index(idx, path)
+
+
+def finish_root(root: Path, object_ids: list[str], name: str | None = None) -> Path:
+    """Write index.json and checksums.sha256 of the dataset root; returns the checksum file."""
+    from ..verify import write_checksums
+
+    update_index(root, object_ids, name)
+    return write_checksums(root)
