@@ -1,0 +1,49 @@
+"""Import a USD articulation (rsart's own or authored by other tools, e.g. Isaac Sim) as an object folder.
+
+``rsart convert usd TWIN.usd --out DIR`` calls :func:`convert_usd`: the USD is read with
+:func:`rsart.usd.read_usd` (Y-up stages rotated to Z-up, lengths scaled to metres, bodies posed
+away from rest moved back to joint values 0) and written by :func:`rsart.twin_io.write_object`,
+which also derives the RS-Art interaction states from the joint limits.
+"""
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+from ..errors import RsartError
+from ..usd import read_usd
+
+USD_SUFFIXES = (".usd", ".usda", ".usdc", ".usdz")
+_SAFE_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]{0,127}$")
+
+
+def default_object_id(src: Path) -> str:
+    """A safe object id from a file name: invalid characters become '_' (e.g. 'my door.usd' -> 'my_door')."""
+    oid = re.sub(r"[^A-Za-z0-9_.\-]", "_", Path(src).stem).lstrip("_.-")[:128]
+    return oid or "usd-object"
+
+
+def convert_usd(src: str | Path, out: str | Path, *, object_id: str | None = None, category: str | None = None,
+                overwrite: bool = False) -> Path:
+    """Read the USD articulation ``src`` and write the object folder ``out``; returns ``out``.
+
+    ``object_id`` defaults to the file stem (made a safe id), ``category`` to "unknown". Units are
+    metres whatever the stage's ``metersPerUnit``. Raises RsartError (naming the prim path) on an
+    invalid USD; ``out`` is then left untouched (the folder is built atomically).
+    """
+    src, out = Path(src), Path(out)
+    if src.suffix.lower() not in USD_SUFFIXES:
+        raise RsartError(f"{src}: not a USD file (expected one of {', '.join(USD_SUFFIXES)})")
+    oid = object_id if object_id is not None else default_object_id(src)
+    if not _SAFE_ID.match(oid):
+        raise RsartError(f"object id {oid!r} is not a safe id (letters, digits, '_', '.', '-')")
+    if category is not None and not category.strip():
+        raise RsartError("category must be a non-empty string")
+    if out.exists() and not overwrite:
+        raise RsartError(f"{out}: already exists (pass overwrite to replace it)")
+    twin = read_usd(src)
+    from ..twin_io import write_object
+
+    write_object(twin, out, object_id=oid, category=category or "unknown",
+                 source={"kind": "usd", "id": src.stem, "file": src.name}, units="m", overwrite=overwrite)
+    return out
