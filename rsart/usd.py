@@ -238,7 +238,7 @@ def _gprim_mesh(prim, pb: Problems) -> trimesh.Trimesh | None:
 
 def _mesh_piece(prim, M: np.ndarray, root_dir: Path, pb: Problems) -> _Piece | None:
     """Read a UsdGeom.Mesh (or supported gprim) and place it with the (4, 4) transform ``M`` (rsart world)."""
-    from pxr import UsdGeom
+    from pxr import Usd, UsdGeom
 
     pp = str(prim.GetPath())
     imageable = UsdGeom.Imageable(prim)
@@ -257,11 +257,16 @@ def _mesh_piece(prim, M: np.ndarray, root_dir: Path, pb: Problems) -> _Piece | N
         m.apply_transform(M)
         return _Piece(pp, role, renderable, m, None)
     mesh = UsdGeom.Mesh(prim)
-    pts, counts, idx = (mesh.GetPointsAttr().Get(), mesh.GetFaceVertexCountsAttr().Get(),
-                        mesh.GetFaceVertexIndicesAttr().Get())
-    v = np.array(pts, dtype=np.float64).reshape(-1, 3) if pts is not None and len(pts) else np.zeros((0, 3))
-    counts = np.array(counts, dtype=np.int64) if counts is not None else np.zeros(0, np.int64)
-    idx = np.array(idx, dtype=np.int64) if idx is not None else np.zeros(0, np.int64)
+    t = Usd.TimeCode.EarliestTime()  # the default value, else the first time sample
+    pts, counts, idx = (mesh.GetPointsAttr().Get(t), mesh.GetFaceVertexCountsAttr().Get(t),
+                        mesh.GetFaceVertexIndicesAttr().Get(t))
+    try:
+        v = np.array(pts, dtype=np.float64).reshape(-1, 3) if pts is not None and len(pts) else np.zeros((0, 3))
+        counts = np.array(counts, dtype=np.int64).reshape(-1) if counts is not None else np.zeros(0, np.int64)
+        idx = np.array(idx, dtype=np.int64).reshape(-1) if idx is not None else np.zeros(0, np.int64)
+    except (TypeError, ValueError):
+        pb.add(pp, "points/faceVertexCounts/faceVertexIndices are not point3f[]/int[]/int[] arrays")
+        return None
     if len(v) == 0:
         pb.add(pp, "mesh has no points")
         return None

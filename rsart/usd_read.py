@@ -136,11 +136,13 @@ def _unique(name: str, taken: set[str]) -> str:
 # ----------------------------------------------------------------------------- joints
 def _frame(stage, world, target: str | None, pos, rot, jp: str, side: int, pb: Problems) -> np.ndarray | None:
     """World (stage) joint frame on one side: the target prim's transform · (localPos, localRot)."""
-    p = np.array(list(pos) if pos is not None else [0.0, 0.0, 0.0], dtype=np.float64)
-    if rot is None:
-        q = np.array([1.0, 0.0, 0.0, 0.0])
-    else:
-        q = np.array([rot.GetReal(), *list(rot.GetImaginary())], dtype=np.float64)
+    try:
+        p = np.array(list(pos) if pos is not None else [0.0, 0.0, 0.0], dtype=np.float64).reshape(3)
+        q = (np.array([1.0, 0.0, 0.0, 0.0]) if rot is None
+             else np.array([rot.GetReal(), *list(rot.GetImaginary())], dtype=np.float64).reshape(4))
+    except (AttributeError, TypeError, ValueError):
+        pb.add(jp, f"localPos{side}/localRot{side} are not a point3f and a quatf")
+        return None
     if not (np.all(np.isfinite(p)) and np.all(np.isfinite(q))):
         pb.add(jp, f"localPos{side}/localRot{side} contain NaN or inf")
         return None
@@ -165,7 +167,11 @@ def _limits(jt, kind: str, jp: str, pb: Problems) -> tuple[float, float] | None:
     lo_a, hi_a = jt.GetLowerLimitAttr(), jt.GetUpperLimitAttr()
     lo = lo_a.Get() if lo_a and lo_a.HasAuthoredValue() else -math.inf
     hi = hi_a.Get() if hi_a and hi_a.HasAuthoredValue() else math.inf
-    lo, hi = float(lo), float(hi)
+    try:
+        lo, hi = float(lo), float(hi)
+    except (TypeError, ValueError):
+        pb.add(jp, f"lowerLimit/upperLimit must be numbers, got {lo!r}, {hi!r}")
+        return None
     if math.isnan(lo) or math.isnan(hi):
         pb.add(jp, "lowerLimit/upperLimit is NaN")
         return None
@@ -286,7 +292,7 @@ def _read_stage(stage, path: Path) -> Twin:
     C = np.eye(4)
     C[:3, :3] = mpu * (Y_UP_TO_Z_UP if up == "Y" else np.eye(3))
 
-    xcache = UsdGeom.XformCache(Usd.TimeCode.Default())
+    xcache = UsdGeom.XformCache(Usd.TimeCode.EarliestTime())  # default value, else the first time sample
     cache: dict[str, np.ndarray] = {}
 
     def world(p: str) -> np.ndarray:
@@ -424,7 +430,7 @@ def read_usd(path: str | Path) -> Twin:
 
     path = Path(path)
     if not path.is_file():
-        raise RsartError(f"{path}: file not found")
+        raise RsartError(f"{path}: file not found" if not path.exists() else f"{path}: not a file")
     try:
         stage = _open_stage(path)
         return _read_stage(stage, path)

@@ -264,3 +264,17 @@ def test_reference_outside_the_folder_is_refused(tmp_path):
     (inner / "twin.usda").write_text(text)
     with pytest.raises(RsartError, match=r"refers to '\.\./outside\.usda', outside"):
         read_usd(inner / "twin.usda")
+
+
+def test_wrongly_typed_attributes(tmp_path):
+    text = GOOD.replace("point3f physics:localPos0 = (0, 0, 1)", 'string physics:localPos0 = "up"')
+    _fails(tmp_path, text, "/o/hinge: localPos0/localRot0 are not a point3f and a quatf")
+    text = GOOD.replace(LID_MESH, LID_MESH.replace("int[] faceVertexCounts = [4]", 'string faceVertexCounts = "four"'))
+    _fails(tmp_path, text, "/o/lid/m: points/faceVertexCounts/faceVertexIndices are not")
+    text = GOOD.replace("float physics:upperLimit = 90", 'string physics:upperLimit = "ninety"')
+    _fails(tmp_path, text, "/o/hinge: lowerLimit/upperLimit must be numbers")
+
+
+def test_non_finite_body_transform(tmp_path):
+    text = GOOD.replace("double3 xformOp:translate = (0, 0, 1)", "double3 xformOp:translate = (0, nan, 1)")
+    _fails(tmp_path, text, "/o/lid: non-finite transform (NaN or inf)")
