@@ -184,3 +184,36 @@ def test_chained_joint_is_scored_in_the_start_frame(dataset, tmp_path):
     res, _ = score_submission(sub, gt, FAST, workers=1)
     elbow = res["lamp-0000"]["parts"][1]
     assert elbow["metrics"]["axis_pos"] < 1e-9 and elbow["metrics"]["axis_ang"] < 1e-9
+
+
+def test_renders_and_masks_are_scored_against_the_dataset_images(dataset, sub_copy):
+    import numpy as np
+
+    from rsart.io import write_mask_png, write_png_rgb
+
+    d, data, save = sub_copy
+    obj = dataset / "cabinet-0000" / "states" / "m0"
+    rng = np.random.default_rng(0)
+    rgb = rng.integers(0, 256, (24, 32, 3), dtype=np.uint8)
+    mask = np.zeros((24, 32), np.uint8)
+    mask[:, :10], mask[:, 10:20], mask[:, 20:] = 1, 2, 3  # base, lid, drawer
+    write_png_rgb(obj / "rgb" / "0000.png", rgb)
+    write_mask_png(obj / "mask" / "0000.png", mask)
+    noisy = np.clip(rgb.astype(int) + 10, 0, 255).astype(np.uint8)
+    write_png_rgb(d / "r.png", noisy)
+    # the submission lists parts as static, drawer, lid -> labels 1, 2, 3 (JSON order, static first)
+    parts = data["results"]["cabinet-0000"]["parts"]
+    data["results"]["cabinet-0000"]["parts"] = {"static": parts["static"], "drawer": parts["drawer"], "lid": parts["lid"]}
+    pm = np.where(mask == 2, 3, np.where(mask == 3, 2, mask)).astype(np.uint8)
+    pm[0, :10] = 0  # 10 background pixels wrong in the base
+    write_mask_png(d / "m.png", pm)
+    data["results"]["cabinet-0000"]["renders"] = {"m0": {"0000": "r.png"}}
+    data["results"]["cabinet-0000"]["masks"] = {"m0": {"0000": "m.png"}}
+    res = score(save(), dataset)
+    r = res["cabinet-0000"]
+    mse = np.mean((noisy / 255.0 - rgb / 255.0) ** 2)
+    assert r["metrics"]["psnr"] == pytest.approx(10 * math.log10(1 / mse))
+    assert 0 < r["metrics"]["ssim"] < 1
+    assert r["metrics"]["mask_acc"] == pytest.approx(1 - 10 / (24 * 32))
+    assert r["metrics"]["mask_iou"] == pytest.approx((230 / 240 + 1 + 1) / 3)
+    assert "psnr" in res["cabinet-0001"]["not_applicable"]
