@@ -37,7 +37,7 @@ class PartSpec:
     pieces: list[tuple[shapes.Solid, Material]] = field(default_factory=list)
 
 
-def texture_size(extent: float, metres_per_px: float = 0.0015) -> int:
+def texture_size(extent: float, metres_per_px: float = 0.003) -> int:
     """Texture resolution (a power of two in [64, 512]) for a visual of ``extent`` metres."""
     px = extent / metres_per_px
     return int(2 ** np.clip(np.round(np.log2(max(px, 1.0))), 6, 9))
