@@ -296,7 +296,8 @@ def _mesh_piece(prim, M: np.ndarray, root_dir: Path, pb: Problems) -> _Piece | N
     tex = _texture(prim, root_dir)
     if tex is not None:
         uv = _primvar(prim, tex[1])
-        ok = uv is not None and uv[0] is not None and uv[0].ndim == 2 and uv[0].shape[1] == 2 and np.all(np.isfinite(uv[0]))
+        ok = (uv is not None and uv[0] is not None and uv[0].ndim == 2 and uv[0].shape[1] == 2
+              and bool(np.all(np.isfinite(uv[0]))))
         if ok and uv[1] in ("vertex", "varying") and len(uv[0]) == len(v):
             visual = trimesh.Trimesh(vw, idx[corners], process=False,
                                      visual=trimesh.visual.TextureVisuals(uv=uv[0], image=tex[0]))

@@ -117,7 +117,8 @@ def test_zero_quaternion(tmp_path):
 
 
 def test_unknown_axis_token(tmp_path):
-    _fails(tmp_path, GOOD.replace('physics:axis = "Y"', 'physics:axis = "W"'), "/o/hinge: axis 'W' is not one of X, Y, Z")
+    _fails(tmp_path, GOOD.replace('physics:axis = "Y"', 'physics:axis = "W"'),
+           "/o/hinge: axis 'W' is not one of X, Y, Z")
 
 
 def test_mesh_without_points(tmp_path):
@@ -132,9 +133,12 @@ def test_face_index_out_of_range(tmp_path):
 
 def test_body_without_geometry_is_an_empty_part(tmp_path):
     """Not an error: helper links (e.g. a URDF screw joint's helper) are bodies without geometry."""
-    text = GOOD.replace('def Mesh "m"\n        {\n            point3f[] points = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)]\n'
-                        '            int[] faceVertexCounts = [4]\n            int[] faceVertexIndices = [0, 1, 2, 3]\n        }\n',
-                        "", 1)
+    base_mesh = ('def Mesh "m"\n        {\n'
+                 '            point3f[] points = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)]\n'
+                 '            int[] faceVertexCounts = [4]\n'
+                 '            int[] faceVertexIndices = [0, 1, 2, 3]\n'
+                 '        }\n')
+    text = GOOD.replace(base_mesh, "", 1)
     assert text != GOOD
     t = _read(tmp_path, text)
     assert len(t.parts[0].mesh.vertices) == 0 and len(t.parts[1].mesh.faces) == 2
@@ -217,8 +221,8 @@ def test_revolute_joint_to_the_world(tmp_path):
 
 
 def test_zero_scale_body(tmp_path):
-    text = GOOD.replace('double3 xformOp:translate = (0, 0, 1)\n        uniform token[] xformOpOrder = ["xformOp:translate"]',
-                        'double3 xformOp:translate = (0, 0, 1)\n        float3 xformOp:scale = (1, 0, 1)\n'
+    text = GOOD.replace('uniform token[] xformOpOrder = ["xformOp:translate"]',
+                        'float3 xformOp:scale = (1, 0, 1)\n'
                         '        uniform token[] xformOpOrder = ["xformOp:translate", "xformOp:scale"]')
     _fails(tmp_path, text, "/o/lid: degenerate transform (zero scale)")
 
@@ -237,7 +241,8 @@ def test_every_problem_is_listed(tmp_path):
     }
 }
 """
-    e = _fails(tmp_path, text, "2 problems found", "/o/hinge: unsupported joint type", "/o/slide: body1 targets /o/ghost")
+    e = _fails(tmp_path, text, "2 problems found", "/o/hinge: unsupported joint type",
+               "/o/slide: body1 targets /o/ghost")
     assert len(e.problems) == 2
 
 

@@ -66,3 +66,18 @@ def test_bad_usd_leaves_nothing(tmp_path):
         convert_usd(tmp_path / "x.obj", tmp_path / "out")
     with pytest.raises(RsartError, match="not a safe id"):
         convert_usd(bad, tmp_path / "out", object_id="../evil")
+
+
+def test_textures_survive_conversion(tmp_path):
+    from rsart.usd import read_usd, write_usd
+    from tests.rsart.test_usd_roundtrip import _textured_twin
+
+    twin = _textured_twin()
+    write_usd(twin, tmp_path / "src" / "box.usda")
+    out = convert_usd(tmp_path / "src" / "box.usda", tmp_path / "box-0000", category="box")
+    assert (out / "twin" / "textures" / "lid_0.png").is_file()  # written by the USD writer beside object.usda
+    back = read_usd(out / "twin" / "object.usda")
+    img = np.asarray(back.parts[1].visuals[0].visual.material.image.convert("RGB"))
+    np.testing.assert_array_equal(img, np.asarray(twin.parts[1].visuals[0].visual.material.image))
+    vis = twin_io.read_twin(out).parts[1].visuals  # the folder's OBJ visuals carry a texture too
+    assert any(getattr(getattr(v.visual, "material", None), "image", None) is not None for v in vis)
