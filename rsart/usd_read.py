@@ -202,9 +202,10 @@ def _parse_joint(stage, prim, kind: str, body_of, world, pb: Problems) -> _UsdJo
         if not targets:
             ends.append(None)
             continue
-        t = stage.GetPrimAtPath(targets[0])
-        if not t or not t.IsValid():
-            pb.add(jp, f"body{side} targets {targets[0]}, which does not exist")
+        t = stage.GetPrimAtPath(targets[0]) if targets[0].IsPrimPath() else None
+        if not t or not t.IsValid() or t.IsPseudoRoot():
+            pb.add(jp, f"body{side} targets {targets[0]}, which does not exist"
+                   if not (t and t.IsPseudoRoot()) else f"body{side} targets the stage root /, not a body")
             ends.append(None)
             continue
         ends.append(str(t.GetPath()))
@@ -420,7 +421,7 @@ def _rsart_exact(rs: dict, axis: np.ndarray, origin: np.ndarray, limits):
 def _tf_message(e: Exception) -> str:
     """The human part of a Tf error (drops the C++ function/file prefix), at most 300 characters."""
     text = " ".join(str(e).split())
-    m = re.search(r" : '(.*)'$", text)
+    m = re.search(r" : '(.*?)'(?= Error in |$)", text)  # the first error's message
     return (m.group(1) if m else text)[:300]
 
 
@@ -433,11 +434,14 @@ def read_usd(path: str | Path) -> Twin:
         raise RsartError(f"{path}: file not found" if not path.exists() else f"{path}: not a file")
     try:
         stage = _open_stage(path)
+    except Tf.ErrorException as e:
+        raise RsartError(f"{path}: not a readable USD file: {_tf_message(e)}") from None
+    try:
         return _read_stage(stage, path)
     except RsartError:
         raise
     except Tf.ErrorException as e:
-        raise RsartError(f"{path}: not a readable USD file: {_tf_message(e)}") from None
+        raise RsartError(f"{path}: USD error while reading the articulation: {_tf_message(e)}") from None
     except Exception as e:  # hostile input must never surface as a traceback
-        raise RsartError(f"{path}: cannot read USD ({type(e).__name__}: {e})") from None
+        raise RsartError(f"{path}: cannot read the USD articulation ({type(e).__name__}: {e})") from None
 

@@ -283,3 +283,15 @@ def test_wrongly_typed_attributes(tmp_path):
 def test_non_finite_body_transform(tmp_path):
     text = GOOD.replace("double3 xformOp:translate = (0, 0, 1)", "double3 xformOp:translate = (0, nan, 1)")
     _fails(tmp_path, text, "/o/lid: non-finite transform (NaN or inf)")
+
+
+def test_joint_without_bodies_and_bad_targets(tmp_path):
+    text = GOOD.replace("        rel physics:body0 = </o/base>\n        rel physics:body1 = </o/lid>\n", "")
+    _fails(tmp_path, text, "/o/hinge: joint has neither body0 nor body1")
+    e = _fails(tmp_path, GOOD.replace("rel physics:body0 = </o/base>", "rel physics:body0 = </>"),
+               "not a readable USD file: Relationship target paths must be absolute")  # USD's own parser refuses
+    assert "textParserHelpers" not in str(e)
+    _fails(tmp_path, GOOD.replace("rel physics:body0 = </o/base>", "rel physics:body0 = </o/base.points>"),
+           "/o/hinge: body0 targets /o/base.points, which does not exist")
+    _fails(tmp_path, GOOD.replace("rel physics:body0 = </o/base>", "rel physics:body0 = [</o/base>, </o/lid>]"),
+           "/o/hinge: body0 has 2 targets; expected one")
