@@ -1,0 +1,110 @@
+"""Settings of PD²GS part discovery, kinematics and meshing (one dataclass, every ablation switch).
+
+Paper constants are the defaults where the paper gives one (2 % cluster merge, 10 positive / 20
+negative prompts, r < 0.05 revolute rule). The paper gives no numbers for τ_mot, τ_vis, the TSDF voxel
+size or the split minimum scale; ours are marked "ours" below. Units: metres (scene units), radians.
+
+Ablation switches (docs/pd2gs-parts.md has the table):
+
+* ``refine``          — False: skip the SAM-prompted refinement + boundary-aware splitting.
+* ``n_states``        — 2 or 4 (None = every state of the field): which interaction states are used.
+* ``mask_provider``   — "grabcut" (default) | "sam" | "oracle" (the dataset's true part masks).
+* ``counter``         — "motion" (default) | "vlm" | "given" (oracle count from meta.json).
+* ``joint_rule``      — "paper" (residual-rank rule) | "bic" (ours: translation vs rotation by BIC).
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+COUNTERS = ("motion", "vlm", "given")
+MASK_PROVIDERS = ("grabcut", "sam", "oracle")
+JOINT_RULES = ("paper", "bic")
+
+
+@dataclass
+class VLMConfig:
+    """An OpenAI-compatible chat-completions endpoint (``url`` = the full .../chat/completions URL).
+
+    ``api_key_env`` names an environment variable holding the key (never the key itself).
+    """
+
+    url: str = ""
+    model: str = "gpt-4o"
+    api_key_env: str = "OPENAI_API_KEY"
+    n_pairs: int = 5
+    timeout_s: float = 60.0
+    seed: int = 0
+
+
+@dataclass
+class DiscoveryConfig:
+    """Every knob of ``pd2gs.discovery.pipeline.discover``."""
+
+    # --- coarse segmentation (paper Sec. 3.3)
+    tau_mot: float = 0.15            # ours: fraction of the largest displacement that counts as motion
+    min_cluster_frac: float = 0.02   # paper: clusters < 2 % of dynamic Gaussians are merged
+    kmeans_seed: int = 0
+    kmeans_n_init: int = 10
+    n_states: int | None = None      # ablation: 2 or 4 states (None = all states of the field)
+
+    # --- how many parts
+    counter: str = "motion"
+    given_count: int | None = None   # for counter="given" (pipeline fills it from meta.json)
+    max_parts: int = 8
+    ransac_thresh_rel: float = 0.05  # ours: inlier distance as a fraction of the largest displacement
+    ransac_iters: int = 300
+    min_part_frac: float = 0.05      # ours: a rigid motion needs this fraction of dynamic Gaussians
+    vlm: VLMConfig = field(default_factory=VLMConfig)
+
+    # --- refinement (paper Sec. 3.4, App. A.1)
+    refine: bool = True
+    tau_vis: float = 2.0             # ours: winner margin w_p / (max_q w_q + eps)
+    vis_eps: float = 1e-6
+    n_pos: int = 10                  # paper
+    n_neg: int = 20                  # paper
+    mask_provider: str = "grabcut"
+    sam_checkpoint: str | None = None
+    sam_model_type: str = "vit_b"
+    grabcut_iters: int = 5
+    refine_views: int = 8            # views per state used for prompts/masks (evenly spaced)
+    axis_sigma: float = 2.0          # ours: ellipse extent = axis_sigma standard deviations
+    min_split_scale: float = 2e-3    # ours: stop splitting below this std-dev (scene units)
+    max_splits: int = 20000
+    vote_views: int = 5
+    vote_depth_tol_rel: float = 0.01  # ours: a view votes only if the child is within this (x extent) of the
+                                      # rendered surface (occluded Gaussians take no label from the masks)
+    finetune: bool = True            # fine-tune children's rotation + opacity (needs the rasterizer)
+    finetune_iters: int = 200
+    finetune_lr: float = 0.01
+
+    # --- kinematics (paper App. A.3, A.4)
+    joint_rule: str = "paper"
+    paper_r_thresh: float = 0.05     # paper: r = (s2 + s3) / s1 < 0.05 -> revolute
+    bic_noise_rel: float = 1e-3      # ours: noise floor of the BIC rule (fraction of the part extent)
+    robust_thresh_rel: float = 0.02  # ours: RANSAC inlier threshold (fraction of the part extent)
+    robust_iters: int = 200
+
+    # --- meshing (paper App. A.2)
+    voxel_size: float | None = None  # None: object extent / 128
+    sdf_trunc_voxels: float = 4.0
+    depth_alpha_min: float = 0.5     # pixels whose part alpha is lower carry no depth
+    mesh_states: str = "start,end"   # states whose meshes are written
+    mesh_views: int = 24             # train views per state rendered for TSDF fusion (evenly spaced)
+    max_image_side: int = 320        # views are rendered/segmented at most this large (intrinsics scaled)
+    render_backend: str = "cpu"
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.counter not in COUNTERS:
+            raise ValueError(f"counter={self.counter!r}: choose one of {COUNTERS}")
+        if self.mask_provider not in MASK_PROVIDERS:
+            raise ValueError(f"mask_provider={self.mask_provider!r}: choose one of {MASK_PROVIDERS}")
+        if self.joint_rule not in JOINT_RULES:
+            raise ValueError(f"joint_rule={self.joint_rule!r}: choose one of {JOINT_RULES}")
+        if self.n_states is not None and self.n_states < 2:
+            raise ValueError("n_states must be >= 2 (motion needs two states)")
+        if not 0.0 <= self.tau_mot <= 1.0:
+            raise ValueError("tau_mot must lie in [0, 1]")
+
+    def to_dict(self) -> dict:
+        return asdict(self)

@@ -1,0 +1,79 @@
+"""Coarse part segmentation from motion (paper Sec. 3.3): static vs dynamic, trajectory clustering.
+
+All functions take Gaussian centres per state, ``means`` (K, N, 3) in the world frame, K >= 2.
+"""
+from __future__ import annotations
+
+import numpy as np
+from sklearn.cluster import KMeans
+
+EPS = 1e-8
+
+
+def max_displacement(means: np.ndarray) -> np.ndarray:
+    """(N,) d_i = max over state pairs (j, k) of ||mu_i^(j) - mu_i^(k)||."""
+    K = means.shape[0]
+    d = np.zeros(means.shape[1])
+    for j in range(K):
+        for k in range(j + 1, K):
+            d = np.maximum(d, np.linalg.norm(means[j] - means[k], axis=1))
+    return d
+
+
+def dynamic_mask(means: np.ndarray, tau_mot: float) -> np.ndarray:
+    """(N,) bool: normalised displacement d_i / max_r d_r >= tau_mot (all False if nothing moves)."""
+    d = max_displacement(means)
+    dmax = float(d.max()) if d.size else 0.0
+    if dmax <= 0:
+        return np.zeros(means.shape[1], dtype=bool)
+    return d / dmax >= tau_mot
+
+
+def trajectory_descriptors(means: np.ndarray) -> np.ndarray:
+    """(N, 4(K-1)) l2-normalised f_i = [unit(dmu^(k)), ||dmu^(k)||]_k over consecutive states."""
+    steps = np.diff(means, axis=0)                      # (K-1, N, 3)
+    lens = np.linalg.norm(steps, axis=2, keepdims=True)  # (K-1, N, 1)
+    f = np.concatenate([steps / (lens + EPS), lens], axis=2)  # (K-1, N, 4)
+    f = np.transpose(f, (1, 0, 2)).reshape(means.shape[1], -1)
+    return f / (np.linalg.norm(f, axis=1, keepdims=True) + EPS)
+
+
+def cluster_trajectories(means_dyn: np.ndarray, n_parts: int, min_frac: float = 0.02, seed: int = 0,
+                         n_init: int = 10) -> np.ndarray:
+    """k-means (k-means++) of the descriptors of the dynamic Gaussians -> (N_dyn,) labels 1..n.
+
+    Clusters holding fewer than ``min_frac`` of the dynamic Gaussians are merged into the nearest
+    remaining cluster (centre distance); labels are renumbered 1..n' by decreasing size.
+    """
+    n = means_dyn.shape[1]
+    if n == 0:
+        return np.zeros(0, dtype=np.int64)
+    k = max(1, min(int(n_parts), n))
+    f = trajectory_descriptors(means_dyn)
+    km = KMeans(n_clusters=k, init="k-means++", n_init=n_init, random_state=seed).fit(f)
+    lab = km.labels_.copy()
+    centres = km.cluster_centers_
+    while True:
+        sizes = np.bincount(lab, minlength=k)
+        alive = np.flatnonzero(sizes > 0)
+        small = [c for c in alive if sizes[c] < min_frac * n]
+        if not small or len(alive) <= 1:
+            break
+        c = min(small, key=lambda c: sizes[c])
+        others = [o for o in alive if o != c]
+        big = [o for o in others if sizes[o] >= min_frac * n] or others
+        target = min(big, key=lambda o: np.linalg.norm(centres[o] - centres[c]))
+        lab[lab == c] = target
+    order = sorted(np.unique(lab), key=lambda c: -np.sum(lab == c))
+    remap = {c: i + 1 for i, c in enumerate(order)}
+    return np.array([remap[c] for c in lab], dtype=np.int64)
+
+
+def coarse_labels(means: np.ndarray, n_parts: int, tau_mot: float, min_frac: float = 0.02,
+                  seed: int = 0, n_init: int = 10) -> np.ndarray:
+    """(N,) part labels: 0 static, 1..n dynamic clusters."""
+    dyn = dynamic_mask(means, tau_mot)
+    labels = np.zeros(means.shape[1], dtype=np.int64)
+    if dyn.any() and n_parts > 0:
+        labels[dyn] = cluster_trajectories(means[:, dyn], n_parts, min_frac, seed, n_init)
+    return labels

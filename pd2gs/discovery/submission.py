@@ -1,0 +1,119 @@
+"""Write PD²GS results as an ``rsart-submission/1`` folder (DESIGN.md §6.2, docs/evaluation.md).
+
+Layout: ``<out>/submission.json`` and ``<out>/<object_id>/<state_id>/<part>.ply`` (+ ``whole.ply``); paths in
+the JSON are relative to ``<out>``. Part names: ``static`` for label 0, ``p1``, ``p2``, ... for the movable
+parts. Joints: axis/origin in the world frame at the ``start`` state, values per state id. An object whose
+result is ``None`` or an exception is written as ``null`` and its reason goes to ``failures.json`` (and the
+log); writing never raises because of one object.
+"""
+from __future__ import annotations
+
+import logging
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+import trimesh
+
+from rsart.io import atomic_dir, atomic_write_bytes, write_json
+
+from .kinematics import JointEstimate
+
+FORMAT = "rsart-submission/1"
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class PartResult:
+    """One discovered part: ``label`` (0 = static), ``meshes`` state id -> world-frame mesh, ``joint``."""
+
+    name: str
+    label: int
+    meshes: dict[str, trimesh.Trimesh] = field(default_factory=dict)
+    joint: JointEstimate | None = None
+
+
+@dataclass
+class ObjectResult:
+    """PD²GS output for one object: parts (static first), whole-object meshes per state, diagnostics."""
+
+    object_id: str
+    parts: list[PartResult]
+    whole: dict[str, trimesh.Trimesh] = field(default_factory=dict)
+    diagnostics: dict[str, Any] = field(default_factory=dict)
+
+
+class ObjectFailure(Exception):
+    """A failed object with its reason (what ``discover`` returns through the pipeline's safe wrapper)."""
+
+
+def _ply(mesh: trimesh.Trimesh) -> bytes:
+    geom = trimesh.Trimesh(np.asarray(mesh.vertices), np.asarray(mesh.faces), process=False)
+    return trimesh.exchange.ply.export_ply(geom, encoding="binary")
+
+
+def object_entry(res: ObjectResult, root: Path) -> dict:
+    """Write one object's meshes under ``root`` and return its JSON entry (paths relative to root).
+
+    Empty meshes are skipped (the validator rejects empty files); a movable part keeps its joint.
+    """
+    parts: dict[str, dict] = {}
+    for p in res.parts:
+        entry: dict[str, Any] = {"meshes": {}}
+        for sid, m in p.meshes.items():
+            if m is None or len(m.faces) == 0:
+                continue
+            rel = f"{res.object_id}/{sid}/{p.name}.ply"
+            atomic_write_bytes(root / rel, _ply(m))
+            entry["meshes"][sid] = rel
+        if p.joint is not None:
+            entry["joint"] = p.joint.to_submission()
+        parts[p.name] = entry
+    out: dict[str, Any] = {"parts": parts}
+    whole = {}
+    for sid, m in res.whole.items():
+        if m is None or len(m.faces) == 0:
+            continue
+        rel = f"{res.object_id}/{sid}/whole.ply"
+        atomic_write_bytes(root / rel, _ply(m))
+        whole[sid] = rel
+    if whole:
+        out["whole"] = whole
+    return out
+
+
+def write_submission(results: Mapping[str, ObjectResult | BaseException | None], out_dir: str | os.PathLike,
+                     method_block: dict, dataset_block: dict | None = None, overwrite: bool = False) -> Path:
+    """Write every object's result (None / exception = failure -> null) to ``out_dir``; -> submission.json.
+
+    ``method_block``: the submission's ``method`` object (needs ``name``); ``dataset_block``: ``{"name",
+    "version"}`` of the evaluated dataset. The folder is built atomically.
+    """
+    if not isinstance(method_block, dict) or not method_block.get("name"):
+        raise ValueError("method_block needs a non-empty 'name'")
+    out = Path(out_dir)
+    entries: dict[str, Any] = {}
+    failures: dict[str, str] = {}
+    with atomic_dir(out, overwrite=overwrite) as tmp:
+        for oid, res in results.items():
+            if isinstance(res, ObjectResult):
+                try:
+                    entries[oid] = object_entry(res, tmp)
+                    continue
+                except Exception as e:  # one object's bad output must not sink the others
+                    reason = f"writing failed: {type(e).__name__}: {e}"
+            elif res is None:
+                reason = "no result"
+            else:
+                reason = f"{type(res).__name__}: {res}"
+            log.warning("%s: failed (%s); written as null", oid, reason)
+            entries[oid] = None
+            failures[oid] = reason
+        doc = {"format": FORMAT, "method": dict(method_block), "dataset": dict(dataset_block or {}),
+               "results": entries}
+        write_json(tmp / "submission.json", doc)
+        if failures:
+            write_json(tmp / "failures.json", failures)
+    return out / "submission.json"
