@@ -115,8 +115,23 @@ class ObjectBuilder:
                                  np.round(np.asarray(origin, dtype=np.float64), 9), (round(lo, 9), round(hi, 9))))
 
     # ----------------------------------------------------------------- build
-    def build(self) -> Twin:
+    def recenter(self) -> None:
+        """Translate everything in x, y so the rest-configuration bounds are centred on x = y = 0
+        (cameras orbit the origin); z is kept (the base rests on z = 0)."""
+        b = np.array([s.bounding_box() for p in self.parts for s, _ in p.pieces])
+        c = (b[:, :3].min(0) + b[:, 3:].max(0)) / 2
+        shift = np.round(np.array([-c[0], -c[1], 0.0]), 6)
+        if not np.any(shift):
+            return
+        for p in self.parts:
+            p.pieces = [(s.translate(tuple(shift)), m) for s, m in p.pieces]
+        for j in self.joints:
+            j.origin = np.round(j.origin + shift, 9)
+
+    def build(self, recenter: bool = True) -> Twin:
         """Union each part's pieces into a watertight mesh, make textured visuals, and return the Twin."""
+        if recenter:
+            self.recenter()
         tparts = []
         for i, p in enumerate(self.parts):
             if not p.pieces:
