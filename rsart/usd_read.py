@@ -214,6 +214,11 @@ def _parse_joint(stage, prim, kind: str, body_of, world, pb: Problems) -> _UsdJo
     if ends[0] is None and ends[1] is None:
         pb.add(jp, "joint has neither body0 nor body1")
         return None
+    b0 = body_of(ends[0]) if ends[0] else None
+    b1 = body_of(ends[1]) if ends[1] else None
+    if b0 is None and b1 is None:
+        pb.add(jp, "joint connects no body (its targets are the world or containers of rigid bodies)")
+        return None
     f0 = _frame(stage, world, ends[0], j.GetLocalPos0Attr().Get(), j.GetLocalRot0Attr().Get(), jp, 0, pb)
     f1 = _frame(stage, world, ends[1], j.GetLocalPos1Attr().Get(), j.GetLocalRot1Attr().Get(), jp, 1, pb)
     axis, limits = "X", None
@@ -223,13 +228,11 @@ def _parse_joint(stage, prim, kind: str, body_of, world, pb: Problems) -> _UsdJo
         if axis not in AXIS_VECTORS:
             pb.add(jp, f"axis {axis!r} is not one of X, Y, Z")
         limits = _limits(jt, kind, jp, pb)
-        if None in ends:
+        if b0 is None or b1 is None:
             pb.add(jp, f"{kind} joint connects a body to the world; rsart needs the static base as a body "
                        "(anchor it with a fixed joint) and the joint between two bodies")
     if len(pb) > n0:
         return None
-    b0 = body_of(ends[0]) if ends[0] else None
-    b1 = body_of(ends[1]) if ends[1] else None
     if b0 is not None and b0 == b1:
         pb.add(jp, f"body0 and body1 are the same body {b0}")
         return None
@@ -305,12 +308,16 @@ def _read_stage(stage, path: Path) -> Twin:
     order = {str(p.GetPath()): i for i, p in enumerate(prims)}
     rigid = {str(p.GetPath()) for p in prims if p.HasAPI(UsdPhysics.RigidBodyAPI)}
 
-    def body_of(target: str) -> str:
+    def body_of(target: str) -> str | None:
+        """The body a joint target stands for: its enclosing rigid body, else the target itself (a static
+        body), or None (the world) when the target is a container of rigid bodies (e.g. ``/World``)."""
         prim = stage.GetPrimAtPath(target)
         while prim and not prim.IsPseudoRoot():
             if str(prim.GetPath()) in rigid:
                 return str(prim.GetPath())
             prim = prim.GetParent()
+        if any(r.startswith(target.rstrip("/") + "/") for r in rigid):
+            return None
         return target
 
     joints: list[_UsdJoint] = []

@@ -89,7 +89,8 @@ def make_object():
 
 
 # --------------------------------------------------------------------------- foreign authoring
-def author(twin: Twin, pieces: dict, path, *, up="Y", mpu=0.01, q=None, seed=0, nest_knob=True) -> None:
+def author(twin: Twin, pieces: dict, path, *, up="Y", mpu=0.01, q=None, seed=0, nest_knob=True,
+           anchor_to: str | None = None) -> None:
     """Write ``twin`` as an Isaac-Sim-like USD at joint values ``q`` (see module docstring)."""
     rng = np.random.default_rng(seed)
     R = Y_UP_TO_Z_UP if up == "Y" else np.eye(3)
@@ -175,6 +176,8 @@ def author(twin: Twin, pieces: dict, path, *, up="Y", mpu=0.01, q=None, seed=0, 
             jt.CreateLowerLimitAttr(float(lo))
             jt.CreateUpperLimitAttr(float(hi))
     anchor = UsdPhysics.FixedJoint.Define(stage, "/World/robot/root_joint")
+    if anchor_to:  # Isaac style: body0 = a container (not a body), standing for the world
+        anchor.CreateBody0Rel().SetTargets([Sdf.Path(anchor_to)])
     anchor.CreateBody1Rel().SetTargets([Sdf.Path(paths[0])])
     UsdPhysics.Scene.Define(stage, "/World/physicsScene")
     ground = UsdGeom.Mesh.Define(stage, "/World/GroundPlane")
@@ -212,14 +215,14 @@ def compare_by_name(expected: Twin, got: Twin, n: int = 10, seed: int = 1) -> fl
     return worst
 
 
-@pytest.mark.parametrize("up,mpu,posed,seed", [("Y", 0.01, False, 0), ("Y", 0.01, True, 1),
-                                               ("Z", 1.0, True, 2), ("Z", 0.001, False, 3)])
-def test_foreign_articulation_matches_direct_twin(tmp_path, up, mpu, posed, seed):
+@pytest.mark.parametrize("up,mpu,posed,seed,anchor_to", [("Y", 0.01, False, 0, None), ("Y", 0.01, True, 1, "/World"),
+                                                         ("Z", 1.0, True, 2, None), ("Z", 0.001, False, 3, "/World")])
+def test_foreign_articulation_matches_direct_twin(tmp_path, up, mpu, posed, seed, anchor_to):
     twin, pieces = make_object()
     q = None
     if posed:  # bodies authored away from the rest configuration: the reader must move them back
         q = {"door_hinge": 0.8, "arm_elbow": -1.1, "drawer_slide": 0.2, "knob_spin": 2.5}
-    author(twin, pieces, tmp_path / "robot.usda", up=up, mpu=mpu, q=q, seed=seed)
+    author(twin, pieces, tmp_path / "robot.usda", up=up, mpu=mpu, q=q, seed=seed, anchor_to=anchor_to)
     got = read_usd(tmp_path / "robot.usda")
     assert [p.name for p in got.parts][:2] == ["base", "knob"]  # knob body nested in the base body prim
     worst = compare_by_name(twin, got)
