@@ -1,0 +1,173 @@
+"""``rsart adapters | export | import``: run published baselines on rsart data through plug-in adapters.
+
+Adapters are discovered **only** through the entry-point group ``rsart.adapters`` (rsart never imports
+the packages that provide them): each entry point's name is the method name and its value an adapter
+object (or a class / zero-argument factory returning one) with
+
+* ``name``, ``title``, ``protocol`` ("two-state" | "single-joint"), ``description`` (strings);
+* ``export(object_dir, out_dir, *, frame, overwrite, **options)`` -> report with ``summary()``;
+* ``import_run(run_dir, object_dir, submission, *, frame, method_version, dataset, **options)`` -> report.
+
+The built-in adapters (PARIS, ArticulatedGS, DTArt, ArtGS, REArtGS, REArtGS++) live in the
+``baselines_adapters`` package and are declared as entry points by rsart's pyproject.toml; a third party
+registers its own in its package metadata. Docs: docs/baselines.md.
+"""
+from __future__ import annotations
+
+import argparse
+from importlib.metadata import entry_points
+from pathlib import Path
+from typing import Any
+
+from ..errors import RsartError
+
+GROUP = "rsart.adapters"
+
+_CONVENTIONS = """\
+Conventions: rsart objects use metres and radians, a z-up world (the object base frame) and OpenCV
+cameras. Exporters convert to each method's own conventions (OpenGL/Blender camera axes, degrees in
+trans.json, millimetre depth PNGs, the peers' z-up GT frame; --frame y-up for builds that keep
+PartNet-Mobility's raw y-up frame) and importers convert back."""
+
+
+def discover() -> dict[str, tuple[Any, str]]:
+    """Method name -> (adapter or None, origin or load error) for every entry point of ``rsart.adapters``."""
+    out: dict[str, tuple[Any, str]] = {}
+    for ep in sorted(entry_points(group=GROUP), key=lambda e: e.name):
+        if ep.name in out:
+            continue
+        origin = f"{ep.value}" + (f" ({ep.dist.name})" if getattr(ep, "dist", None) is not None else "")
+        try:
+            obj = ep.load()
+            if not (hasattr(obj, "export") and hasattr(obj, "import_run")) or isinstance(obj, type):
+                obj = obj()
+            if not (hasattr(obj, "export") and hasattr(obj, "import_run")):
+                raise TypeError("not an adapter (needs export() and import_run())")
+            out[ep.name] = (obj, origin)
+        except Exception as e:  # one broken plug-in must not hide the others
+            out[ep.name] = (None, f"{origin}: failed to load: {type(e).__name__}: {e}")
+    return out
+
+
+def get(name: str) -> Any:
+    ads = discover()
+    if not ads:
+        raise RsartError(f"no adapters installed (entry-point group {GROUP!r} is empty); install rsart with "
+                         f"its baselines_adapters package, or a package that registers adapters")
+    if name not in ads:
+        raise RsartError(f"no adapter {name!r} (available: {', '.join(sorted(ads))})")
+    obj, origin = ads[name]
+    if obj is None:
+        raise RsartError(f"adapter {name!r}: {origin}")
+    return obj
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("adapters", help="list the installed method adapters (plug-ins)",
+                       description="Method adapters found in the entry-point group 'rsart.adapters'.")
+    asub = p.add_subparsers(dest="adapters_command", metavar="ACTION")
+    pl = asub.add_parser("list", help="list adapters: method, protocol, description, where it comes from")
+    pl.set_defaults(func=_list)
+    p.set_defaults(func=_list)
+
+    pe = sub.add_parser("export", help="write an rsart object in a method's input layout",
+                        description="Export OBJECT (an object folder with the protocol's states rendered) into "
+                                    "the input layout of --method, with that method family's capture protocol "
+                                    "(two-state or single-joint). OUT/README.txt gives the commands to run in "
+                                    "the method's repository.\n\n" + _CONVENTIONS,
+                        formatter_class=argparse.RawDescriptionHelpFormatter)
+    pe.add_argument("object", type=Path, help="object folder (meta.json + rendered states)")
+    pe.add_argument("--method", required=True, help="adapter name (see `rsart adapters list`)")
+    pe.add_argument("--out", type=Path, required=True, help="output folder (created atomically)")
+    pe.add_argument("--frame", default="z-up", choices=("z-up", "y-up"), help="method world frame (default z-up)")
+    pe.add_argument("--overwrite", action="store_true", help="replace an existing OUT")
+    pe.set_defaults(func=_export)
+
+    pi = sub.add_parser("import", help="add a method's outputs for one object to a submission file",
+                        description="Read RUN_DIR (the method's output folder for OBJECT) and add or replace "
+                                    "OBJECT's entry in SUBMISSION (rsart-submission/1; created if missing; "
+                                    "written atomically). Score it with `rsart-eval SUBMISSION --data ROOT`.\n\n"
+                                    + _CONVENTIONS, formatter_class=argparse.RawDescriptionHelpFormatter)
+    pi.add_argument("run_dir", type=Path, help="the method's output folder for this object")
+    pi.add_argument("--method", required=True, help="adapter name (see `rsart adapters list`)")
+    pi.add_argument("--object", required=True, help="object id (with --data) or object folder")
+    pi.add_argument("--data", type=Path, help="dataset root (index.json) or object folder holding OBJECT")
+    pi.add_argument("--into", type=Path, required=True, help="submission JSON to create or update")
+    pi.add_argument("--frame", default="z-up", choices=("z-up", "y-up"), help="method world frame used at export")
+    pi.add_argument("--method-version", help="version of the method's code (recorded in the submission)")
+    pi.add_argument("--failed", metavar="REASON", help="record the object as failed (null entry) instead of reading RUN_DIR")
+    pi.set_defaults(func=_import)
+
+
+def _list(args) -> int:
+    ads = discover()
+    if not ads:
+        print(f"no adapters installed (entry-point group {GROUP!r} is empty)")
+        return 0
+    w = max(len(n) for n in ads)
+    for name, (obj, origin) in ads.items():
+        if obj is None:
+            print(f"{name:<{w}}  BROKEN  {origin}")
+        else:
+            print(f"{name:<{w}}  {getattr(obj, 'protocol', '?'):<12}  {getattr(obj, 'description', '')}  [{origin}]")
+    return 0
+
+
+def _export(args) -> int:
+    ad = get(args.method)
+    rep = ad.export(args.object, args.out, frame=args.frame, overwrite=args.overwrite)
+    print(rep.summary() if hasattr(rep, "summary") else rep)
+    print(f"next: the commands in {args.out / 'README.txt'}")
+    return 0
+
+
+def _dataset_of(data: Path | None) -> dict | None:
+    if data is not None and (data / "index.json").is_file():
+        from ..format import read_index
+
+        idx = read_index(data / "index.json")
+        return {"name": idx.name, "version": str(idx.version)}
+    return None
+
+
+def _object_dir(ref: str, data: Path | None) -> Path:
+    p = Path(ref)
+    if (p / "meta.json").is_file():
+        return p
+    if data is None:
+        raise RsartError(f"--object {ref}: not an object folder; give --data ROOT to look the id up")
+    if (data / "meta.json").is_file():
+        return data
+    if (data / "index.json").is_file():
+        from ..format import read_index
+
+        if ref not in read_index(data / "index.json").objects:
+            raise RsartError(f"{data}: no object {ref!r} in index.json")
+        return data / ref
+    raise RsartError(f"{data}: neither a dataset root (index.json) nor an object folder (meta.json)")
+
+
+def _import(args) -> int:
+    ad = get(args.method)
+    obj_dir = _object_dir(args.object, args.data)
+    if args.failed is not None:
+        from ..format import read_meta
+
+        meta = read_meta(obj_dir)
+        _write_failure(ad, args.into, meta.object_id, args.failed, args.method_version, _dataset_of(args.data))
+        print(f"{args.method}: recorded {meta.object_id} as failed in {args.into}")
+        return 0
+    rep = ad.import_run(args.run_dir, obj_dir, args.into, frame=args.frame, method_version=args.method_version,
+                        dataset=_dataset_of(args.data))
+    print(rep.summary() if hasattr(rep, "summary") else rep)
+    print(f"score: rsart-eval {args.into} --data {args.data or obj_dir}")
+    return 0
+
+
+def _write_failure(ad: Any, submission: Path, object_id: str, reason: str, version: str | None,
+                   dataset: dict | None) -> None:
+    if hasattr(ad, "record_failure"):
+        ad.record_failure(submission, object_id, reason, method_version=version, dataset=dataset)
+        return
+    raise RsartError(f"adapter {ad.name!r} cannot record failures")
+
