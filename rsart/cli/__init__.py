@@ -20,6 +20,7 @@ COMMANDS = [
     "rsart.cli.show",         # show (pictures)
     "rsart.cli.convert",      # convert (PartNet-Mobility, URDF, USD)
     "rsart.cli.validate_submission",  # validate-submission
+    "rsart.cli.adapters",     # adapters, export, import (method plug-ins, entry points rsart.adapters)
 ]
 
 DESCRIPTION = """\
