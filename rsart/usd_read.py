@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -50,6 +50,7 @@ class _UsdJoint:
     axis: str
     limits: tuple[float, float] | None  # stage units: degrees (revolute) or stage lengths (prismatic)
     rsart: dict
+    sign: float = 1.0  # -1 when re-oriented (body0/body1 swapped): the motion axis is then -axis
 
 
 # ----------------------------------------------------------------------------- opening
@@ -241,6 +242,40 @@ def _parse_joint(stage, prim, kind: str, body_of, world, pb: Problems) -> _UsdJo
 
 
 # ----------------------------------------------------------------------------- tree
+def _orient(joints: list[_UsdJoint]) -> list[_UsdJoint]:
+    """Joints re-oriented away from the one body anchored to the world (body0 = the side nearer to it).
+
+    A joint authored child-first (``body1`` nearer the anchor) is swapped: bodies and frames trade
+    places and the axis flips, which keeps its value and limits (frame1 = frame0·M(θ) <=>
+    frame0 = frame1·M(-θ) = frame1·M_{-axis}(θ)). Without exactly one anchored body, joints stay as authored.
+    """
+    anchored = {j.body1 or j.body0 for j in joints if j.body0 is None or j.body1 is None}
+    if len(anchored) != 1:
+        return joints
+    root = anchored.pop()
+    adj: dict[str, list[int]] = {}
+    for i, j in enumerate(joints):
+        if j.body0 is not None and j.body1 is not None:
+            adj.setdefault(j.body0, []).append(i)
+            adj.setdefault(j.body1, []).append(i)
+    out, seen, stack, used = list(joints), {root}, [root], set()
+    while stack:
+        b = stack.pop()
+        for i in adj.get(b, []):
+            if i in used:
+                continue
+            used.add(i)
+            j = joints[i]
+            other = j.body1 if j.body0 == b else j.body0
+            if other in seen:  # a cycle: left as authored, _tree reports it
+                continue
+            seen.add(other)
+            stack.append(other)
+            if j.body1 == b:
+                out[i] = replace(j, body0=j.body1, body1=j.body0, frame0=j.frame1, frame1=j.frame0, sign=-j.sign)
+    return out
+
+
 def _tree(bodies: list[str], joints: list[_UsdJoint], pb: Problems) -> tuple[str, dict[str, _UsdJoint]]:
     """(root body, body -> the joint whose body1 it is). Problems: two parents, roots != 1, cycles."""
     parent: dict[str, _UsdJoint] = {}
@@ -340,6 +375,7 @@ def _read_stage(stage, path: Path) -> Twin:
     if not bodies_sorted:
         pb.add("/", "no rigid bodies (PhysicsRigidBodyAPI) and no joints: not a USD articulation")
     pb.raise_if_any(str(path))
+    joints = _orient(joints)
     root, parent = _tree(bodies_sorted, joints, pb)
     pb.raise_if_any(str(path))
 
@@ -382,7 +418,7 @@ def _read_stage(stage, path: Path) -> Twin:
         if j.kind == "fixed":
             continue
         F0 = C @ D[j.body0] @ j.frame0
-        axis = F0[:3, :3] @ AXIS_VECTORS[j.axis]
+        axis = F0[:3, :3] @ (j.sign * AXIS_VECTORS[j.axis])
         axis = axis / np.linalg.norm(axis)
         origin = F0[:3, 3].copy()
         limits = j.limits

@@ -90,7 +90,7 @@ def make_object():
 
 # --------------------------------------------------------------------------- foreign authoring
 def author(twin: Twin, pieces: dict, path, *, up="Y", mpu=0.01, q=None, seed=0, nest_knob=True,
-           anchor_to: str | None = None) -> None:
+           anchor_to: str | None = None, reverse: tuple[str, ...] = ()) -> None:
     """Write ``twin`` as an Isaac-Sim-like USD at joint values ``q`` (see module docstring)."""
     rng = np.random.default_rng(seed)
     R = Y_UP_TO_Z_UP if up == "Y" else np.eye(3)
@@ -162,7 +162,8 @@ def author(twin: Twin, pieces: dict, path, *, up="Y", mpu=0.01, q=None, seed=0, 
         jt = (UsdPhysics.RevoluteJoint if j.type == "revolute" else UsdPhysics.PrismaticJoint).Define(
             stage, f"{paths[j.parent]}/{j.name}")
         jt.CreateAxisAttr(tok)
-        for side, part in ((0, j.parent), (1, j.child)):
+        rev = j.name in reverse  # authored child-first: body0 = child (the joint value then runs backwards)
+        for side, part in ((0, j.child), (1, j.parent)) if rev else ((0, j.parent), (1, j.child)):
             Fq = Tq[part] @ F
             Fs = _T(R=R.T @ Fq[:3, :3], t=R.T @ Fq[:3, 3] / mpu)
             L = np.linalg.inv(G[part]) @ Fs
@@ -173,6 +174,8 @@ def author(twin: Twin, pieces: dict, path, *, up="Y", mpu=0.01, q=None, seed=0, 
             (jt.CreateLocalRot0Attr if side == 0 else jt.CreateLocalRot1Attr)(Gf.Quatf(qw, qx, qy, qz))
         if j.limits is not None:
             lo, hi = (np.degrees(j.limits) if j.type == "revolute" else np.asarray(j.limits) / mpu)
+            if rev:
+                lo, hi = -hi, -lo
             jt.CreateLowerLimitAttr(float(lo))
             jt.CreateUpperLimitAttr(float(hi))
     anchor = UsdPhysics.FixedJoint.Define(stage, "/World/robot/root_joint")
@@ -364,3 +367,25 @@ def test_foreign_texture_face_varying(tmp_path):
     k = np.where(np.all(np.isclose(vis.vertices, [1, 1, 1]), axis=1))[0]
     np.testing.assert_allclose(vis.visual.uv[k], [[1, 1]] * len(k))
     assert t.joint("slide").limits == (0.0, 0.5)
+
+
+def test_child_first_joints_are_reoriented_from_the_anchored_base(tmp_path):
+    """body0 = child, body1 = parent (value running backwards): read as parent -> child with the axis
+    flipped and the same USD limits, i.e. the same physical motion."""
+    twin, pieces = make_object()
+    author(twin, pieces, tmp_path / "r.usda", q={"arm_elbow": 0.4, "drawer_slide": 0.1}, seed=5,
+           reverse=("arm_elbow", "drawer_slide"))
+    got = read_usd(tmp_path / "r.usda")
+    for name in ("arm_elbow", "drawer_slide"):
+        j, g = twin.joint(name), got.joint(name)
+        assert got.parts[g.parent].name == twin.parts[j.parent].name
+        assert got.parts[g.child].name == twin.parts[j.child].name
+        np.testing.assert_allclose(g.axis, -j.axis, atol=1e-6)
+        np.testing.assert_allclose(g.limits, [-j.limits[1], -j.limits[0]], atol=1e-6)
+    rng = np.random.default_rng(0)
+    for _ in range(5):
+        q = {j.name: float(rng.uniform(*(j.limits or (-6.0, 6.0)))) for j in twin.joints}
+        qg = {k: (-v if k in ("arm_elbow", "drawer_slide") else v) for k, v in q.items()}
+        em = {p.name: m for p, m in zip(twin.parts, twin.posed_meshes(q))}
+        for p, m in zip(got.parts, got.posed_meshes(qg)):
+            assert np.abs(m.vertices - em[p.name].vertices).max() < 1e-6
