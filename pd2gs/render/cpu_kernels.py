@@ -61,22 +61,44 @@ def make_consts(dtype, alpha_max: float, alpha_min: float, t_min: float) -> np.n
 
 
 @njit(inline="always")
-def _exp_neg(x, c):
+def _exp_consts(c):
+    """Constants of ``_exp_neg`` as a tuple of scalars (keeps array loads out of the loops)."""
+    return (c[C_HALF], c[C_ONE], c[C_ZERO], c[C_LOG2E], c[C_LN2], c[C_CUT],
+            c[C_POLY], c[C_POLY + 1], c[C_POLY + 2], c[C_POLY + 3], c[C_POLY + 4],
+            c[C_POLY + 5], c[C_POLY + 6], c[C_POLY + 7], c[C_HALF], c[C_Q4], c[C_Q16], c[C_Q256])
+
+
+@njit(inline="always")
+def _exp_neg(x, e):
     """exp(x) for x in [log(1/255) - 0.1, 0] by range reduction and a degree-7 Taylor
-    polynomial (relative error < 1e-8); returns 0 below that range. Written with arithmetic
-    and selects only, so the pixel loops vectorise (numba has no SIMD exp here)."""
-    nf = np.floor(x * c[C_LOG2E] + c[C_HALF])
-    f = x - nf * c[C_LN2]
-    p = c[C_POLY + 7]
-    for j in range(6, -1, -1):
-        p = p * f + c[C_POLY + j]
-    m = np.int64(-nf) if x >= c[C_CUT] else np.int64(0)
-    s = c[C_ONE]
-    s = s * c[C_HALF] if (m & 1) != 0 else s
-    s = s * c[C_Q4] if (m & 2) != 0 else s
-    s = s * c[C_Q16] if (m & 4) != 0 else s
-    s = s * c[C_Q256] if (m & 8) != 0 else s
-    return p * s if x >= c[C_CUT] else c[C_ZERO]
+    polynomial (relative error ~1e-9); returns 0 below that range. Arithmetic and selects
+    only, so the pixel loops vectorise (numba has no SIMD exp here). e = _exp_consts(c)."""
+    nf = np.floor(x * e[3] + e[0])
+    f = x - nf * e[4]
+    p = ((((((e[13] * f + e[12]) * f + e[11]) * f + e[10]) * f + e[9]) * f + e[8]) * f
+         + e[7]) * f + e[6]
+    ok = x >= e[5]
+    m = np.int64(-nf) if ok else np.int64(0)
+    s = e[1]
+    s = s * e[14] if (m & 1) != 0 else s
+    s = s * e[15] if (m & 2) != 0 else s
+    s = s * e[16] if (m & 4) != 0 else s
+    s = s * e[17] if (m & 8) != 0 else s
+    return p * s if ok else e[2]
+
+
+@njit(inline="always")
+def _row_range(my, ca, cb, cc, o, amin, y0):
+    """Tile-local rows [lo, hi) where alpha >= amin is possible: the ellipse
+    d^T conic d <= -2 log(amin / o), widened by one pixel for rounding. Empty if o < amin."""
+    if not o >= amin:
+        return 0, 0
+    det = ca * cc - cb * cb
+    r2 = -2.0 * np.log(amin / o)
+    hy = np.sqrt(r2 * ca / det) + 1.0 if det > 0 else 1e30
+    lo = max(0, np.int64(np.floor(my - hy)) - y0) if hy < 1e6 else 0
+    hi = min(TILE, np.int64(np.ceil(my + hy)) - y0 + 1) if hy < 1e6 else TILE
+    return lo, hi
 
 
 @njit(fastmath=True)
@@ -94,7 +116,7 @@ def _tile_order(offsets):
     return np.argsort(-(offsets[1:] - offsets[:-1]), kind="mergesort")
 
 
-@njit(parallel=True, cache=True)
+@njit(parallel=True, cache=True, error_model="numpy")
 def forward_kernel(offsets, gids, means2d, conics, opac, feat, width, height, tiles_x,
                    c, labels, lw_out, maxw_pair):
     """Front-to-back compositing of each 16x16 tile, Gaussians outer, the 256 pixels inner.
@@ -111,6 +133,8 @@ def forward_kernel(offsets, gids, means2d, conics, opac, feat, width, height, ti
     last = np.zeros((height, width), np.int64)
     n_lab = lw_out.shape[2]
     want_max = maxw_pair.shape[0] > 0
+    amax, amin, tmin, half = c[C_AMAX], c[C_AMIN], c[C_TMIN], c[C_HALF]
+    ec = _exp_consts(c)
     order = _tile_order(offsets)
     npx = TILE * TILE
     for i in prange(order.shape[0]):
@@ -123,7 +147,10 @@ def forward_kernel(offsets, gids, means2d, conics, opac, feat, width, height, ti
         act = np.zeros(npx, dt)
         T = np.ones(npx, dt)
         lst = np.zeros(npx, np.int64)
-        acc = np.zeros((4, npx), dt)
+        a0 = np.zeros(npx, dt)
+        a1 = np.zeros(npx, dt)
+        a2 = np.zeros(npx, dt)
+        a3 = np.zeros(npx, dt)
         wbuf = np.zeros(npx, dt)
         lw = np.zeros((max(n_lab, 1), npx), dt)
         for p in range(npx):
@@ -138,36 +165,39 @@ def forward_kernel(offsets, gids, means2d, conics, opac, feat, width, height, ti
             mx, my = means2d[g, 0], means2d[g, 1]
             ca, cb, cc, o = conics[g, 0], conics[g, 1], conics[g, 2], opac[g]
             f0, f1, f2, f3 = feat[g, 0], feat[g, 1], feat[g, 2], feat[g, 3]
-            for p in range(npx):
+            lo, hi = _row_range(my, ca, cb, cc, o, amin, y0)
+            for p in range(lo * TILE, hi * TILE):
                 dx = px[p] - mx
                 dy = py[p] - my
-                power = -c[C_HALF] * (ca * dx * dx + cc * dy * dy) - cb * dx * dy
-                alpha = min(c[C_AMAX], o * _exp_neg(power, c))
+                power = -half * (ca * dx * dx + cc * dy * dy) - cb * dx * dy
+                alpha = min(amax, o * _exp_neg(power, ec))
                 tp = T[p]
                 test = tp * (one - alpha)
-                good = (power <= zero) & (alpha >= c[C_AMIN]) & (act[p] > zero)
-                contrib = good & (test >= c[C_TMIN])
+                good = (power <= zero) & (alpha >= amin) & (act[p] > zero)
+                contrib = good & (test >= tmin)
+                stop = good & (test < tmin)
                 w = alpha * tp if contrib else zero
                 wbuf[p] = w
-                acc[0, p] += w * f0
-                acc[1, p] += w * f1
-                acc[2, p] += w * f2
-                acc[3, p] += w * f3
+                a0[p] += w * f0
+                a1[p] += w * f1
+                a2[p] += w * f2
+                a3[p] += w * f3
                 T[p] = test if contrib else tp
-                stop = good & (test < c[C_TMIN])
                 act[p] = zero if stop else act[p]
                 lst[p] = k + 1 if contrib else lst[p]
             if n_lab > 0:
                 lab = labels[g]
-                for p in range(npx):
+                for p in range(lo * TILE, hi * TILE):
                     lw[lab, p] += wbuf[p]
             if want_max:
-                maxw_pair[k] = np.max(wbuf)
+                maxw_pair[k] = np.max(wbuf[lo * TILE:hi * TILE]) if hi > lo else zero
         for p in range(npx):
             x, y = x0 + p % TILE, y0 + p // TILE
             if x < width and y < height:
-                for j in range(4):
-                    out[y, x, j] = acc[j, p]
+                out[y, x, 0] = a0[p]
+                out[y, x, 1] = a1[p]
+                out[y, x, 2] = a2[p]
+                out[y, x, 3] = a3[p]
                 trans[y, x] = T[p]
                 last[y, x] = lst[p]
                 for j in range(n_lab):
@@ -175,7 +205,7 @@ def forward_kernel(offsets, gids, means2d, conics, opac, feat, width, height, ti
     return out, trans, last
 
 
-@njit(parallel=True, cache=True)
+@njit(parallel=True, cache=True, error_model="numpy", fastmath={"reassoc", "nsz"})
 def backward_kernel(offsets, gids, means2d, conics, opac, feat, width, height, tiles_x,
                     c, trans, last, g_feat, g_trans):
     """Exact gradients of ``forward_kernel``: each pixel walks its list back to front
@@ -186,6 +216,8 @@ def backward_kernel(offsets, gids, means2d, conics, opac, feat, width, height, t
     """
     dt = means2d.dtype
     one, zero, half = c[C_ONE], c[C_ZERO], c[C_HALF]
+    amax, amin = c[C_AMAX], c[C_AMIN]
+    ec = _exp_consts(c)
     pair_grad = np.zeros((gids.shape[0], 10), dt)
     order = _tile_order(offsets)
     npx = TILE * TILE
@@ -197,12 +229,17 @@ def backward_kernel(offsets, gids, means2d, conics, opac, feat, width, height, t
         px = np.empty(npx, dt)
         py = np.empty(npx, dt)
         T = np.ones(npx, dt)
-        tfin = np.ones(npx, dt)
+        tf = np.ones(npx, dt)
         lst = np.zeros(npx, np.int64)
-        gf = np.zeros((4, npx), dt)
+        g0 = np.zeros(npx, dt)
+        g1 = np.zeros(npx, dt)
+        g2 = np.zeros(npx, dt)
+        g3 = np.zeros(npx, dt)
         gt = np.zeros(npx, dt)
-        S = np.zeros((4, npx), dt)
-        buf = np.zeros((10, npx), dt)
+        s0 = np.zeros(npx, dt)
+        s1 = np.zeros(npx, dt)
+        s2 = np.zeros(npx, dt)
+        s3 = np.zeros(npx, dt)
         kmax = start
         for p in range(npx):
             x, y = x0 + p % TILE, y0 + p // TILE
@@ -210,51 +247,63 @@ def backward_kernel(offsets, gids, means2d, conics, opac, feat, width, height, t
             py[p] = y
             if x < width and y < height:
                 T[p] = trans[y, x]
-                tfin[p] = trans[y, x]
+                tf[p] = trans[y, x]
                 lst[p] = last[y, x]
                 kmax = max(kmax, last[y, x])
                 gt[p] = g_trans[y, x]
-                for j in range(4):
-                    gf[j, p] = g_feat[y, x, j]
+                g0[p] = g_feat[y, x, 0]
+                g1[p] = g_feat[y, x, 1]
+                g2[p] = g_feat[y, x, 2]
+                g3[p] = g_feat[y, x, 3]
         for k in range(kmax - 1, start - 1, -1):
             g = gids[k]
             mx, my = means2d[g, 0], means2d[g, 1]
             ca, cb, cc, o = conics[g, 0], conics[g, 1], conics[g, 2], opac[g]
             f0, f1, f2, f3 = feat[g, 0], feat[g, 1], feat[g, 2], feat[g, 3]
-            for p in range(npx):
+            r0 = r1 = r2 = r3 = r4 = r5 = r6 = r7 = r8 = r9 = zero
+            lo, hi = _row_range(my, ca, cb, cc, o, amin, y0)
+            for p in range(lo * TILE, hi * TILE):
                 dx = px[p] - mx
                 dy = py[p] - my
                 power = -half * (ca * dx * dx + cc * dy * dy) - cb * dx * dy
-                gauss = _exp_neg(power, c)
+                gauss = _exp_neg(power, ec)
                 raw = o * gauss
-                alpha = min(c[C_AMAX], raw)
-                good = (power <= zero) & (alpha >= c[C_AMIN]) & (k < lst[p])
+                alpha = min(amax, raw)
+                good = (power <= zero) & (alpha >= amin) & (k < lst[p])
                 om = one - alpha
-                ti = T[p] / om if good else T[p]
+                tp = T[p]
+                ti = tp / om if good else tp
                 wt = alpha * ti if good else zero
-                dal = ti * (gf[0, p] * (f0 - S[0, p]) + gf[1, p] * (f1 - S[1, p])
-                            + gf[2, p] * (f2 - S[2, p]) + gf[3, p] * (f3 - S[3, p])) \
-                    - gt[p] * tfin[p] / om
+                dal = ti * (g0[p] * (f0 - s0[p]) + g1[p] * (f1 - s1[p]) + g2[p] * (f2 - s2[p])
+                            + g3[p] * (f3 - s3[p])) - gt[p] * tf[p] / om
                 dal = dal if good else zero
-                S[0, p] = alpha * f0 + om * S[0, p] if good else S[0, p]
-                S[1, p] = alpha * f1 + om * S[1, p] if good else S[1, p]
-                S[2, p] = alpha * f2 + om * S[2, p] if good else S[2, p]
-                S[3, p] = alpha * f3 + om * S[3, p] if good else S[3, p]
+                s0[p] = alpha * f0 + om * s0[p] if good else s0[p]
+                s1[p] = alpha * f1 + om * s1[p] if good else s1[p]
+                s2[p] = alpha * f2 + om * s2[p] if good else s2[p]
+                s3[p] = alpha * f3 + om * s3[p] if good else s3[p]
                 T[p] = ti
-                dgeo = dal if raw <= c[C_AMAX] else zero
+                dgeo = dal if raw <= amax else zero
                 dpow = alpha * dgeo
-                buf[0, p] = dpow * (ca * dx + cb * dy)
-                buf[1, p] = dpow * (cb * dx + cc * dy)
-                buf[2, p] = -half * dx * dx * dpow
-                buf[3, p] = -dx * dy * dpow
-                buf[4, p] = -half * dy * dy * dpow
-                buf[5, p] = gauss * dgeo
-                buf[6, p] = wt * gf[0, p]
-                buf[7, p] = wt * gf[1, p]
-                buf[8, p] = wt * gf[2, p]
-                buf[9, p] = wt * gf[3, p]
-            for j in range(10):
-                pair_grad[k, j] = _sum(buf[j])
+                r0 += dpow * (ca * dx + cb * dy)
+                r1 += dpow * (cb * dx + cc * dy)
+                r2 += -half * dx * dx * dpow
+                r3 += -dx * dy * dpow
+                r4 += -half * dy * dy * dpow
+                r5 += gauss * dgeo
+                r6 += wt * g0[p]
+                r7 += wt * g1[p]
+                r8 += wt * g2[p]
+                r9 += wt * g3[p]
+            pair_grad[k, 0] = r0
+            pair_grad[k, 1] = r1
+            pair_grad[k, 2] = r2
+            pair_grad[k, 3] = r3
+            pair_grad[k, 4] = r4
+            pair_grad[k, 5] = r5
+            pair_grad[k, 6] = r6
+            pair_grad[k, 7] = r7
+            pair_grad[k, 8] = r8
+            pair_grad[k, 9] = r9
     return pair_grad
 
 

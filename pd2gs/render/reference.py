@@ -99,7 +99,9 @@ def rasterize_reference(
         if out_l is not None:
             out_l = out_l.index_copy(0, tiles, (w @ onehot[ids]).detach())
         if maxw is not None:
-            maxw.scatter_reduce_(0, ids.reshape(-1), w.detach().amax(dim=1).reshape(-1), "amax")
+            inside = ((px < width) & (py < height)).to(dt)[:, :, None]  # tiles overhang the image
+            wmax = (w.detach() * inside).amax(dim=1)
+            maxw.scatter_reduce_(0, ids.reshape(-1), wmax.reshape(-1), "amax")
 
     def image(x: torch.Tensor) -> torch.Tensor:
         x = x.reshape(tiles_y, tiles_x, TILE, TILE, -1).permute(0, 2, 1, 3, 4)
