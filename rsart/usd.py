@@ -145,8 +145,11 @@ def _primvar(prim, name: str):
     pv = UsdGeom.PrimvarsAPI(prim).GetPrimvar(name)
     if not pv or not pv.HasValue():
         return None
-    vals = pv.ComputeFlattened()
-    return (np.array(vals, dtype=np.float64) if vals is not None else None), str(pv.GetInterpolation())
+    try:
+        vals = pv.ComputeFlattened()
+        return (np.array(vals, dtype=np.float64) if vals is not None else None), str(pv.GetInterpolation())
+    except (TypeError, ValueError):  # a wrongly typed primvar is ignored like a missing one
+        return None
 
 
 def _texture(prim, root_dir: Path):
@@ -293,7 +296,11 @@ def _mesh_piece(prim, M: np.ndarray, root_dir: Path, pb: Problems) -> _Piece | N
     if colors:
         geom.visual = trimesh.visual.ColorVisuals(geom, **colors)
     visual = None
-    tex = _texture(prim, root_dir)
+    try:
+        tex = _texture(prim, root_dir)
+    except Exception as e:  # a malformed material network leaves the mesh untextured, never sinks it
+        warnings.warn(f"{pp}: material not understood ({type(e).__name__}: {e}); kept untextured", stacklevel=2)
+        tex = None
     if tex is not None:
         uv = _primvar(prim, tex[1])
         ok = (uv is not None and uv[0] is not None and uv[0].ndim == 2 and uv[0].shape[1] == 2

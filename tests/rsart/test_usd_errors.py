@@ -295,3 +295,45 @@ def test_joint_without_bodies_and_bad_targets(tmp_path):
            "/o/hinge: body0 targets /o/base.points, which does not exist")
     _fails(tmp_path, GOOD.replace("rel physics:body0 = </o/base>", "rel physics:body0 = [</o/base>, </o/lid>]"),
            "/o/hinge: body0 has 2 targets; expected one")
+
+
+def test_texture_outside_the_folder_is_not_read(tmp_path):
+    from PIL import Image
+
+    Image.fromarray(np.zeros((2, 2, 3), np.uint8)).save(tmp_path / "secret.png")
+    (tmp_path / "obj").mkdir()
+    text = GOOD.replace(LID_MESH, LID_MESH.replace(
+        "int[] faceVertexIndices = [0, 1, 2, 3]",
+        "int[] faceVertexIndices = [0, 1, 2, 3]\n"
+        "            texCoord2f[] primvars:st = [(0, 0), (1, 0), (1, 1), (0, 1)] (interpolation = \"vertex\")\n"
+        "            rel material:binding = </o/mat>")).rstrip()[:-1] + """
+    def Material "mat"
+    {
+        token outputs:surface.connect = </o/mat/pbr.outputs:surface>
+        def Shader "pbr"
+        {
+            uniform token info:id = "UsdPreviewSurface"
+            color3f inputs:diffuseColor.connect = </o/mat/tex.outputs:rgb>
+            token outputs:surface
+        }
+        def Shader "tex"
+        {
+            uniform token info:id = "UsdUVTexture"
+            asset inputs:file = @../secret.png@
+            float3 outputs:rgb
+        }
+    }
+}
+"""
+    (tmp_path / "obj" / "t.usda").write_text(text.replace('(prepend apiSchemas = ["PhysicsRigidBodyAPI"])\n    {\n'
+                                                          '        double3',
+                                                          '(prepend apiSchemas = ["PhysicsRigidBodyAPI", '
+                                                          '"MaterialBindingAPI"])\n    {\n        double3'))
+    with pytest.warns(UserWarning, match="lies outside"):
+        t = read_usd(tmp_path / "obj" / "t.usda")
+    assert t.parts[1].visuals == []  # geometry kept, texture refused
+    # the same file inside the folder is read
+    (tmp_path / "obj" / "t.usda").write_text((tmp_path / "obj" / "t.usda").read_text().replace("../secret.png", "ok.png"))
+    Image.fromarray(np.full((2, 2, 3), 9, np.uint8)).save(tmp_path / "obj" / "ok.png")
+    t = read_usd(tmp_path / "obj" / "t.usda")
+    assert np.asarray(t.parts[1].visuals[0].visual.material.image)[0, 0, 0] == 9
