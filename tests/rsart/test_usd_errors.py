@@ -333,7 +333,8 @@ def test_texture_outside_the_folder_is_not_read(tmp_path):
         t = read_usd(tmp_path / "obj" / "t.usda")
     assert t.parts[1].visuals == []  # geometry kept, texture refused
     # the same file inside the folder is read
-    (tmp_path / "obj" / "t.usda").write_text((tmp_path / "obj" / "t.usda").read_text().replace("../secret.png", "ok.png"))
+    inside = (tmp_path / "obj" / "t.usda").read_text().replace("../secret.png", "ok.png")
+    (tmp_path / "obj" / "t.usda").write_text(inside)
     Image.fromarray(np.full((2, 2, 3), 9, np.uint8)).save(tmp_path / "obj" / "ok.png")
     t = read_usd(tmp_path / "obj" / "t.usda")
     assert np.asarray(t.parts[1].visuals[0].visual.material.image)[0, 0, 0] == 9
