@@ -20,6 +20,7 @@ path is the prim path.
 """
 from __future__ import annotations
 
+import json
 import math
 import re
 from dataclasses import dataclass, replace
@@ -123,6 +124,18 @@ def _safe_name(name: object, fallback: str) -> str:
         return name
     s = re.sub(r"[^A-Za-z0-9_.\-]", "_", fallback).lstrip("_.-")[:128]
     return s or "part"
+
+
+def _extra(prim) -> dict:
+    """rsart's ``rsart:extra`` JSON dict on ``prim`` ({} when absent, not a dict or malformed)."""
+    text = custom_attr(prim, "rsart:extra")
+    if not isinstance(text, str) or len(text) > 1_000_000:
+        return {}
+    try:
+        d = json.loads(text, parse_constant=lambda c: None)
+    except ValueError:
+        return {}
+    return d if isinstance(d, dict) else {}
 
 
 def _unique(name: str, taken: set[str]) -> str:
@@ -238,6 +251,7 @@ def _parse_joint(stage, prim, kind: str, body_of, world, pb: Problems) -> _UsdJo
         pb.add(jp, f"body0 and body1 are the same body {b0}")
         return None
     rs = {k: custom_attr(prim, f"rsart:{k}") for k in ("name", "axis", "origin", "limits")}
+    rs["extra"] = _extra(prim)
     return _UsdJoint(jp, kind, _safe_name(rs["name"], prim.GetName()), b0, b1, f0, f1, axis, limits, rs)
 
 
@@ -410,7 +424,7 @@ def _read_stage(stage, path: Path) -> Twin:
         gprim = stage.GetPrimAtPath(g)
         name = _unique(_safe_name(custom_attr(gprim, "rsart:name"), gprim.GetName()), taken)
         if mesh is not None:
-            parts.append(TwinPart(len(parts), name, mesh, visuals))
+            parts.append(TwinPart(len(parts), name, mesh, visuals, _extra(gprim)))
     pb.raise_if_any(str(path))
 
     out_joints, jtaken = [], set()
@@ -427,7 +441,7 @@ def _read_stage(stage, path: Path) -> Twin:
                       else (limits[0] * mpu, limits[1] * mpu))
         axis, origin, limits = _rsart_exact(j.rsart, axis, origin, limits)
         out_joints.append(Joint(_unique(j.name, jtaken), j.kind, index[group[j.body0]], index[group[j.body1]],
-                                axis, origin, limits))
+                                axis, origin, limits, dict(j.rsart.get("extra") or {})))
     layer_data = stage.GetRootLayer().customLayerData
     dp = stage.GetDefaultPrim()
     name = layer_data.get("rsart:twinName") if isinstance(layer_data.get("rsart:twinName"), str) else None

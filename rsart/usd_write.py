@@ -26,7 +26,7 @@ import numpy as np
 import trimesh
 
 from .errors import RsartError
-from .io import atomic_write_bytes, atomic_write_text
+from .io import atomic_write_bytes, atomic_write_text, dumps_json
 from .kinematics import Twin, TwinPart
 from .usd import RSART_USD_FORMAT, prim_name, quat_from_matrix, rotation_x_to
 
@@ -73,6 +73,19 @@ def _set_role(prim, role: str) -> None:
     from pxr import Sdf
 
     prim.CreateAttribute("rsart:role", Sdf.ValueTypeNames.String, custom=True).Set(role)
+
+
+def _set_extra(prim, extra: dict) -> None:
+    """Keep a part's/joint's ``extra`` dict as JSON in ``rsart:extra`` (skipped when empty or not JSON)."""
+    from pxr import Sdf
+
+    if not extra:
+        return
+    try:
+        text = dumps_json(extra)
+    except (TypeError, ValueError):
+        return
+    prim.CreateAttribute("rsart:extra", Sdf.ValueTypeNames.String, custom=True).Set(text)
 
 
 def _colors(m: trimesh.Trimesh) -> tuple[str, np.ndarray] | None:
@@ -151,6 +164,7 @@ def _write_part(stage, root: str, part: TwinPart, pname: str, usd_dir: Path, tex
     xf.AddTranslateOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Vec3d(*centre.tolist()))
     prim = xf.GetPrim()
     prim.CreateAttribute("rsart:name", Sdf.ValueTypeNames.String, custom=True).Set(part.name)
+    _set_extra(prim, part.extra)
     UsdPhysics.RigidBodyAPI.Apply(prim)
 
     if not empty:
@@ -214,6 +228,7 @@ def _write_joint(stage, root: str, j, jname: str, body_paths: list[str], centres
         jt.CreateUpperLimitAttr(float(hi))
     p = jt.GetPrim()
     p.CreateAttribute("rsart:name", Sdf.ValueTypeNames.String, custom=True).Set(j.name)
+    _set_extra(p, j.extra)
     p.CreateAttribute("rsart:axis", Sdf.ValueTypeNames.Double3, custom=True).Set(Gf.Vec3d(*axis.tolist()))
     p.CreateAttribute("rsart:origin", Sdf.ValueTypeNames.Double3, custom=True).Set(Gf.Vec3d(*origin.tolist()))
     if j.limits is not None:

@@ -37,12 +37,14 @@ def make_mixed() -> Twin:
     drawer = _box([0.3, 0.3, 0.08], [0.05, -0.25, 0.05])
     knob = trimesh.creation.cylinder(radius=0.02, height=0.03, sections=16)
     knob.apply_translation([0.1, -0.2, 0.415])
-    parts = [TwinPart(0, "base", base), TwinPart(1, "door-1", door), TwinPart(2, "0arm.x", arm),
+    parts = [TwinPart(0, "base", base, extra={"label": "body", "links": ["a", "b"]}),
+             TwinPart(1, "door-1", door), TwinPart(2, "0arm.x", arm),
              TwinPart(3, "drawer", drawer), TwinPart(4, "knob", knob)]
     joints = [
         Joint("door-hinge", "revolute", 0, 1, _unit([0.1, 0.2, 1.0]), np.array([0.4, 0.03, 0.05]), (-0.3, 1.9)),
         Joint("arm.elbow", "revolute", 1, 2, _unit([1.0, -0.4, 0.3]), np.array([0.45, -0.05, 0.3]), (-2.5, 0.7)),
-        Joint("drawer_slide", "prismatic", 0, 3, _unit([1.0, 0.3, -0.1]), np.array([0.2, -0.2, 0.05]), (0.0, 0.27)),
+        Joint("drawer_slide", "prismatic", 0, 3, _unit([1.0, 0.3, -0.1]), np.array([0.2, -0.2, 0.05]), (0.0, 0.27),
+              extra={"damping": 0.5}),
         Joint("knob_spin", "revolute", 0, 4, np.array([0.0, 0.0, -1.0]), np.array([0.1, -0.2, 0.4]), None),
     ]
     return Twin("mixed object", parts, joints)
@@ -72,7 +74,9 @@ def assert_same_posed(a: Twin, b: Twin, n: int = 12, tol: float = 1e-6, seed: in
 
 def _assert_same_structure(a: Twin, b: Twin, tol: float = 1e-9) -> None:
     assert [p.name for p in b.parts] == [p.name for p in a.parts]
+    assert [p.extra for p in b.parts] == [p.extra for p in a.parts]
     assert [j.name for j in b.joints] == [j.name for j in a.joints]
+    assert [j.extra for j in b.joints] == [j.extra for j in a.joints]
     for ja, jb in zip(a.joints, b.joints):
         assert (jb.type, jb.parent, jb.child) == (ja.type, ja.parent, ja.child)
         np.testing.assert_allclose(jb.axis, ja.axis, atol=tol)
