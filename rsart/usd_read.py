@@ -475,6 +475,20 @@ def _rsart_exact(rs: dict, axis: np.ndarray, origin: np.ndarray, limits):
     return axis, origin, limits
 
 
+def read_usd_units(path: str | Path) -> str:
+    """The twin's unit label: "scene" when rsart wrote it from a unitless twin
+    (``customLayerData["rsart:units"]``), else "m" (read_usd always converts lengths to metres)."""
+    from pxr import Tf
+
+    try:
+        layer = _fresh_layer(str(path))
+    except Tf.ErrorException as e:
+        raise RsartError(f"{path}: not a readable USD file: {_tf_message(e)}") from None
+    if layer is None:
+        raise RsartError(f"{path}: not a readable USD file")
+    return "scene" if layer.customLayerData.get("rsart:units") == "scene" else "m"
+
+
 def _tf_message(e: Exception) -> str:
     """The human part of a Tf error (drops the C++ function/file prefix), at most 300 characters."""
     text = " ".join(str(e).split())

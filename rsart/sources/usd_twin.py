@@ -28,7 +28,8 @@ def convert_usd(src: str | Path, out: str | Path, *, object_id: str | None = Non
     """Read the USD articulation ``src`` and write the object folder ``out``; returns ``out``.
 
     ``object_id`` defaults to the file stem (made a safe id), ``category`` to "unknown". Units are
-    metres whatever the stage's ``metersPerUnit``. Raises RsartError (naming the prim path) on an
+    metres whatever the stage's ``metersPerUnit`` — except a twin rsart wrote from a unitless
+    ("scene"-unit) object, which stays "scene". Raises RsartError (naming the prim path) on an
     invalid USD; ``out`` is then left untouched (the folder is built atomically).
     """
     src, out = Path(src), Path(out)
@@ -43,7 +44,9 @@ def convert_usd(src: str | Path, out: str | Path, *, object_id: str | None = Non
         raise RsartError(f"{out}: already exists (pass overwrite to replace it)")
     twin = read_usd(src)
     from ..twin_io import write_object
+    from ..usd_read import read_usd_units
 
     write_object(twin, out, object_id=oid, category=category or "unknown",
-                 source={"kind": "usd", "id": src.stem, "file": src.name}, units="m", overwrite=overwrite)
+                 source={"kind": "usd", "id": src.stem, "file": src.name}, units=read_usd_units(src),
+                 overwrite=overwrite)
     return out

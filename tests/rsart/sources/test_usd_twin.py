@@ -81,3 +81,14 @@ def test_textures_survive_conversion(tmp_path):
     np.testing.assert_array_equal(img, np.asarray(twin.parts[1].visuals[0].visual.material.image))
     vis = twin_io.read_twin(out).parts[1].visuals  # the folder's OBJ visuals carry a texture too
     assert any(getattr(getattr(v.visual, "material", None), "image", None) is not None for v in vis)
+
+
+def test_scene_units_are_kept(tmp_path):
+    from rsart.usd import write_usd
+    from tests.rsart.test_usd_roundtrip import make_mixed
+
+    write_usd(make_mixed(), tmp_path / "pn.usda", units="scene")
+    out = convert_usd(tmp_path / "pn.usda", tmp_path / "o")
+    assert json.loads((out / "meta.json").read_text())["units"] == "scene"
+    write_usd(make_mixed(), tmp_path / "m.usda")
+    assert json.loads((convert_usd(tmp_path / "m.usda", tmp_path / "o2") / "meta.json").read_text())["units"] == "m"
