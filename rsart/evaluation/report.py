@@ -133,6 +133,16 @@ def _cell(m: dict, info: MetricInfo) -> str:
     return f"{v:{fmt}}{star}"
 
 
+def _units(scores: dict) -> str:
+    """The scene units of the scored objects: "m" when every object is metric, else "units"."""
+    us = {r.get("units") for r in scores["objects"].values()}
+    return "m" if us == {"m"} else "units"
+
+
+def _unit_label(info: MetricInfo, scores: dict) -> str:
+    return info.unit.replace("units", _units(scores))
+
+
 def summary_markdown(scores: dict) -> str:
     """Paper-style table: metrics as row groups, categories as columns, a Mean column, ``*`` for failures."""
     agg = scores["aggregate"]
@@ -153,7 +163,7 @@ def summary_markdown(scores: dict) -> str:
         if m.group != group:
             group = m.group
             lines.append(f"| **{group}** |" + " |" * (len(cats) + 1))
-        unit = f" ({m.unit})" if m.unit else ""
+        unit = f" ({_unit_label(m, scores)})" if m.unit else ""
         cells = [_cell(agg["categories"][c]["metrics"][m.key], m) for c in cats]
         mc = agg["overall"]["mean_of_categories"][m.key]
         cells.append(_cell({"mean": mc["mean"], "n_failed": mc["n_failed"]}, m))
@@ -161,9 +171,10 @@ def summary_markdown(scores: dict) -> str:
     lines += ["", "`*`: the method failed on at least one object (or part) of that category for this metric; "
               "failures are listed in scores.json and never averaged. `–`: not applicable (Axis Pos of "
               "prismatic joints, image metrics without submitted images).",
-              "Chamfer: 10k area samples, squared L2, both directions summed, ×1000, mean over "
-              f"{len(scores['config']['chamfer']['seeds'])} seeds and the Chamfer states. "
-              "Mean = mean over categories. Formulas: docs/evaluation.md.", ""]
+              f"Chamfer: {scores['config']['chamfer']['n_samples']} area samples per mesh, squared L2, both "
+              f"directions summed, ×1000, mean over {len(scores['config']['chamfer']['seeds'])} seed(s) and the "
+              f"Chamfer states; component filter {'on' if scores['config']['chamfer']['component_filter'] else 'off'}. "
+              f"Units: {_units(scores)}. Mean = mean over categories. Formulas: docs/evaluation.md.", ""]
     fl = scores["failures"]
     if fl:
         lines += [f"## Failures ({len(fl)})", ""]
@@ -199,7 +210,7 @@ def summary_plot(scores: dict) -> bytes:
             if x["n_failed"]:
                 b.set_hatch("//")
         ax.set_xticks(range(len(labels)), labels, rotation=45, ha="right", fontsize=8)
-        ax.set_title(f"{m.label}{' (' + m.unit + ')' if m.unit else ''}", fontsize=9)
+        ax.set_title(f"{m.label}{' (' + _unit_label(m, scores) + ')' if m.unit else ''}", fontsize=9)
     for ax in list(axes.flat)[len(present):]:
         ax.axis("off")
     fig.suptitle(f"{scores['submission']['method'].get('name', '?')}: per-category scores (hatched: failures)",

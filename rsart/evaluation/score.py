@@ -196,11 +196,14 @@ def _score_object(task: _Task) -> dict:
                     res["parts"][-1]["not_applicable"].append(k)
                 else:
                     res["parts"][-1]["failures"][k] = res["reason"]
+        types = {tj.type for _, tj, _ in true}
         for k in OBJECT_METRICS:
-            if k in IMAGE_METRICS:
-                res["not_applicable"].append(k)
-            else:
+            applicable = not (k in IMAGE_METRICS or (k in ("axis_pos", "part_motion_rev") and "revolute" not in types)
+                              or (k == "part_motion_pri" and "prismatic" not in types))
+            if applicable:
                 res["failures"][k] = res["reason"]
+            else:
+                res["not_applicable"].append(k)
         return res
 
     res["status"] = "scored"
