@@ -103,7 +103,9 @@ def noise(m: Material, size: int) -> Image.Image:
     base = np.asarray(m.color, np.float32)
     n = fractal_noise(rng, size, 3, 5)
     grain = rng.random((size, size)).astype(np.float32)
-    t = 0.8 + 0.35 * (n - 0.5) + 0.12 * (grain - 0.5)
+    t = 0.8 + 0.55 * (n - 0.5) + 0.08 * (grain - 0.5)
+    speck = value_noise(rng, size, max(8, size // 6)) > 0.95       # sparse flecks: trackable features
+    t[speck] *= 0.75
     return _rgb(base[None, None, :] * t[..., None])
 
 
