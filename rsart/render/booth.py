@@ -36,14 +36,17 @@ class BoothSpec:
 def booth_meshes(object_bounds: np.ndarray, camera_radius: float, spec: BoothSpec = BoothSpec()) -> list[trimesh.Trimesh]:
     """Floor + curtain + pedestal meshes (world frame) for an object with (2, 3) ``object_bounds``.
 
-    The pedestal is at least ``pedestal_size`` wide and 10% wider than the object's footprint;
+    The pedestal is at least ``pedestal_size`` wide and 10% wider than the object's footprint; its top lies
+    0.2% of the object's diagonal below the object's lowest point (about 1 mm: invisible, but it keeps the
+    object's bottom and the pedestal from being coincident surfaces);
     the curtain radius is at least 1.6x the camera radius so every camera stays inside it.
     """
     lo, hi = np.asarray(object_bounds, dtype=np.float64)
     cx, cy = (lo[:2] + hi[:2]) / 2
     foot = float(np.max(hi[:2] - lo[:2]))
     side = max(spec.pedestal_size, 1.1 * foot)
-    top = float(lo[2])
+    size = float(np.linalg.norm(hi - lo))
+    top = float(lo[2]) - 0.002 * size  # a hair below the object: no coincident surfaces (depth-test ties)
     floor = top - spec.pedestal_height
     radius = max(spec.curtain_min_radius, 1.6 * camera_radius)
     wall_h = (hi[2] - floor) + 2.0 * camera_radius + 1.0

@@ -91,7 +91,9 @@ class StateRenderer:
         scene = booth_meshes(object_bounds, camera_radius, options.booth) if options.background == "booth" else []
         self.scene = build_scene(parts, scene, nthreads=nthreads)
         self.backend = resolve_backend(options.rgb_backend)
-        extent = float(np.linalg.norm(np.ptp(object_bounds, axis=0))) + 4 * camera_radius
+        size = float(np.linalg.norm(np.ptp(object_bounds, axis=0)))
+        # a near plane well in front of the object keeps 24-bit GL depth precise to ~1e-6 of the distance
+        znear, zfar = 0.05 * camera_radius, 10 * (size + 4 * camera_radius)
         if self.backend == "raycast":
             self._shader = RaycastShader(options.lighting)
             self._shader.set_scene(self.scene.meshes)
@@ -100,7 +102,7 @@ class StateRenderer:
             K = options.intrinsics
             self._raster = rgb_renderer or PyrenderRgb(K.width, K.height, self.backend.split("-", 1)[1],
                                                        options.lighting, options.antialias)
-            self._raster.set_scene(list(self.scene.meshes), extent)
+            self._raster.set_scene(list(self.scene.meshes), znear, zfar)
 
     def render(self, c2w: np.ndarray, rng: np.random.Generator) -> Frame:
         """Render the view with camera-to-world ``c2w`` (4, 4, OpenCV); ``rng`` drives backgrounds/noise."""

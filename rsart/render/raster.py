@@ -127,6 +127,22 @@ def _disable_msaa(pyrender_renderer_module) -> None:
     mod._rsart_msaa_wrapped = True
 
 
+def _ordered_node(pr, seq: int, mesh):
+    """A pyrender mesh node whose hash is ``seq``. pyrender keeps nodes in sets and draws them sorted by
+    the distance of their (here all identity) poses, so with default id-based hashes the draw order -- and
+    which of two coincident surfaces wins the depth test -- changed from run to run. Small-int hashes make
+    the order the insertion order, so renders are reproducible byte for byte."""
+
+    class OrderedNode(pr.Node):
+        def __hash__(self) -> int:
+            return seq
+
+        def __eq__(self, other) -> bool:
+            return self is other
+
+    return OrderedNode(mesh=mesh, matrix=np.eye(4))
+
+
 class PyrenderRgb:
     """Rasterised RGB of a static mesh set with pyrender; one OpenGL context per instance."""
 
@@ -148,14 +164,14 @@ class PyrenderRgb:
         self._renderer = pyrender.OffscreenRenderer(width, height)
         self._scene = None
 
-    def set_scene(self, meshes: list[trimesh.Trimesh], extent: float) -> None:
-        """Upload world-frame meshes (with their colours/textures); ``extent`` bounds the scene size (for clipping)."""
+    def set_scene(self, meshes: list[trimesh.Trimesh], znear: float, zfar: float) -> None:
+        """Upload world-frame meshes (with their colours/textures), drawn in list order; clip at ``znear``/``zfar``."""
         pr = self._pr
         a = self.lighting.ambient
         scene = pr.Scene(bg_color=[0.0, 0.0, 0.0, 0.0], ambient_light=[a, a, a])
-        for m in meshes:
-            scene.add(pr.Mesh.from_trimesh(_linear_colours(m), smooth=False))
-        self._cam = pr.IntrinsicsCamera(1, 1, 0, 0, znear=max(1e-3, 1e-4 * extent), zfar=10 * extent)
+        for i, m in enumerate(meshes):
+            scene.add_node(_ordered_node(pr, i, pr.Mesh.from_trimesh(_linear_colours(m), smooth=False)))
+        self._cam = pr.IntrinsicsCamera(1, 1, 0, 0, znear=znear, zfar=zfar)
         self._cam_node = scene.add(self._cam, pose=np.eye(4))
         self._light_node = scene.add(pr.DirectionalLight(color=np.ones(3), intensity=self.lighting.headlight),
                                      pose=np.eye(4))

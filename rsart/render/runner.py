@@ -126,7 +126,7 @@ def plan_object(obj_dir: Path, twin: Twin, meta: ObjectMeta, job: RenderJob) -> 
 def write_plan(plan: ObjectPlan, job: RenderJob, overwrite: bool = False) -> None:
     """Write meta.json (with added states), render.json and every cameras.json; refuse mismatched settings."""
     obj = plan.obj_dir
-    manifest = job.manifest()
+    manifest = json.loads(dumps_json(job.manifest()))  # as it reads back (tuples -> lists)
     mpath = obj / MANIFEST
     if mpath.exists():
         old = read_json(mpath)
