@@ -56,7 +56,7 @@ def finetune_children(fld: StateField, children: np.ndarray, views: list[list[tu
         optim.zero_grad()
         loss.backward()
         optim.step()
-        losses.append(float(loss))
+        losses.append(float(loss.detach()))
     with torch.no_grad():
         rn = (r / r.norm(dim=-1, keepdim=True))
         for k in range(fld.k):

@@ -158,8 +158,8 @@ def vote_labels(means: np.ndarray, cams: list[Camera], label_maps: list[np.ndarr
 def boundary_split(fld: StateField, labels: np.ndarray, ref: int, cams: list[Camera],
                    part_masks: list[dict[int, np.ndarray]], visible: np.ndarray | None = None,
                    axis_sigma: float = 2.0, min_scale: float = 2e-3, max_splits: int = 20000,
-                   vote_views: int = 5, depths: list[np.ndarray] | None = None, depth_tol: float = 0.0
-                   ) -> SplitResult:
+                   vote_views: int = 5, depths: list[np.ndarray] | None = None, depth_tol: float = 0.0,
+                   edge_px: float = 1.0) -> SplitResult:
     """Split every Gaussian whose projected major axis leaves its part's mask in its nearest view.
 
     fld: the K state fields; labels (N,); ref: state index the masks belong to; cams: the V views of that
@@ -167,7 +167,7 @@ def boundary_split(fld: StateField, labels: np.ndarray, ref: int, cams: list[Cam
     Largest projected error (pixels of the axis outside the mask) first; children re-queued until they
     lie in one mask or their std-dev falls below ``min_scale``; finally every child's label is voted
     over its ``vote_views`` nearest views where it is not occluded (``depths``: rendered depth per view,
-    ``depth_tol`` its tolerance). Splits are applied in every state in the Gaussian's own frame.
+    ``depth_tol`` its tolerance). An axis end must leave the mask by more than ``edge_px`` pixels. Splits are applied in every state in the Gaussian's own frame.
     """
     K, N = fld.k, fld.n
     cap = N + 2 * max_splits
@@ -194,7 +194,11 @@ def boundary_split(fld: StateField, labels: np.ndarray, ref: int, cams: list[Cam
         if m is None:
             return None
         c, A2, B2 = project_ellipse(means[ref, i], R, scales[ref, i], cams[v], axis_sigma)
-        ins = _inside(m, np.stack([A2, B2]))
+        ends = np.stack([A2, B2])
+        half = np.linalg.norm(A2 - c)
+        if half > edge_px:  # ends pulled edge_px towards the centre: pixel rounding is not a boundary
+            ends = c + (ends - c) * (1 - edge_px / half)
+        ins = _inside(m, ends)
         if ins.all() or not _inside(m, c)[0] and not ins.any():
             return None
         j = int(np.argmax(scales[ref, i]))
@@ -208,7 +212,7 @@ def boundary_split(fld: StateField, labels: np.ndarray, ref: int, cams: list[Cam
         towards = 1.0 if pin[0] else -1.0
         A, B = (uv[0], uv[1]) if pin[0] else (uv[1], uv[0])
         lam = in_mask_ratio(m, A, B)
-        if lam >= 1.0 or lam <= 0.0:
+        if lam <= 0.0 or (1 - lam) * float(np.linalg.norm(B - A)) <= edge_px:
             return None
         return (1 - lam) * float(np.linalg.norm(B - A)), lam, towards
 

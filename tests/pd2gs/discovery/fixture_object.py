@@ -34,7 +34,7 @@ def cameras(n: int, size=(96, 72)) -> list[Camera]:
     intr = Intrinsics(size[0], size[1], 80.0, 80.0, (size[0] - 1) / 2, (size[1] - 1) / 2, None)
     out = []
     for i in range(n):
-        az = -1.2 + 2.4 * i / max(1, n - 1)
+        az = 2 * np.pi * i / n
         el = 0.35 + 0.35 * (i % 2)
         eye = np.array([0.25, 0.0, 0.2]) + 1.1 * np.array([np.cos(az) * np.cos(el), np.sin(az) * np.cos(el), np.sin(el)])
         out.append(Camera(intr, look_at(eye, np.array([0.1, 0.0, 0.2]))))
