@@ -143,7 +143,9 @@ def _usd(args) -> int:
         from ..sources.usd_twin import convert_usd
     except ImportError as e:
         raise RsartError(f"USD import is not available in this build ({e})") from None
-    meta = convert_usd(args.file, args.out, object_id=args.object_id, category=args.category,
-                       overwrite=args.overwrite)
-    print(_summary(meta, args.out))
+    from ..format import read_meta
+
+    out = convert_usd(args.file, args.out, object_id=args.object_id, category=args.category,
+                      overwrite=args.overwrite)
+    print(_summary(read_meta(Path(out) / "meta.json"), Path(out)))
     return 0

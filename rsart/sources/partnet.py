@@ -231,7 +231,7 @@ def read_partnet(obj_dir: str | os.PathLike) -> tuple[Twin, PartnetInfo, list[st
         raise RsartError(f"{urdf_path}: file not found (not a PartNet-Mobility object folder?)")
     info = read_partnet_info(obj_dir)
     twin = read_urdf(urdf_path)
-    twin, notes = fold_helper_parts(twin)
+    twin, notes = fold_helper_parts(twin, str(urdf_path))
     check_geometry(twin, str(urdf_path))
     twin = name_parts(twin, info.semantics)
     T = _link_transforms(urdf_path)

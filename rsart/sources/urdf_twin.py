@@ -87,7 +87,7 @@ def reindexed(name: str, parts: list[TwinPart], joints: list[Joint]) -> Twin:
     return Twin(name, new_parts, new_joints)
 
 
-def fold_helper_parts(twin: Twin) -> tuple[Twin, list[str]]:
+def fold_helper_parts(twin: Twin, source: str | None = None) -> tuple[Twin, list[str]]:
     """Fold or drop movable parts without geometry (see module docstring); returns (twin, notes).
 
     Raises RsartError for a geometry-less part with several child joints (no one-joint representation).
@@ -125,7 +125,7 @@ def fold_helper_parts(twin: Twin) -> tuple[Twin, list[str]]:
                              f"{hj.name!r} ({hj.type}); joint {cj.name!r} ({cj.type}) recorded as {kind}")
                 del parts[pi], joints[pi]
             else:
-                raise RsartError(f"{twin.name}: part {p.name!r} has no geometry but {len(kids)} child joints; "
+                raise RsartError(f"{source or twin.name}: part {p.name!r} (links {p.extra.get('links', [])}) has no geometry but {len(kids)} child joints; "
                                  "it cannot be folded into a one-joint-per-part twin")
             changed = True
             break
@@ -325,7 +325,7 @@ def convert_urdf(src: str | os.PathLike, out: str | os.PathLike, *, object_id: s
 
     src = Path(src)
     twin = read_urdf(src)
-    twin, notes = fold_helper_parts(twin)
+    twin, notes = fold_helper_parts(twin, str(src))
     check_geometry(twin, str(src))
     extra: dict[str, Any] = {"converted_from": src.name}
     if scale is not None:
