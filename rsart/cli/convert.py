@@ -97,10 +97,10 @@ def _partnet(args) -> int:
     from ..sources.partnet import convert_partnet, convert_partnet_root, split_ids
 
     if args.root is None:
-        if args.obj_dir is None:
-            raise RsartError("give PM_OBJECT_DIR, or --root PM_ROOT with --ids or --split")
         if args.ids or args.split:
             raise RsartError("--ids/--split need --root PM_ROOT (and no PM_OBJECT_DIR)")
+        if args.obj_dir is None:
+            raise RsartError("give PM_OBJECT_DIR, or --root PM_ROOT with --ids or --split")
         meta = convert_partnet(args.obj_dir, args.out, object_id=args.object_id, metric_scale=args.metric_scale,
                                overwrite=args.overwrite, watertight=_watertight(args), log=_log(args))
         print(_summary(meta, args.out))
