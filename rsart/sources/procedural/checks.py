@@ -43,11 +43,19 @@ def contacts(twin: Twin, values: dict[str, float], clearance: float = 0.001) -> 
     return out
 
 
-def check_states(twin: Twin) -> list[dict[str, float]]:
-    """The joint configurations to check: the RS-Art protocol states plus the 1/6 and 5/6 multi states."""
+def check_states(twin: Twin, steps: int = 12) -> list[dict[str, float]]:
+    """The joint configurations to check: the RS-Art protocol states, the multi-part motion at every
+    1/``steps`` of the ranges, and each joint alone at 1/4, 1/2, 3/4 of its range (others at m0)."""
     states, _ = protocol_states(twin.joints)
     vals = [s.values for s in states]
-    vals += [multi_values(twin.joints, t) for t in (1 / 6, 5 / 6)]
+    vals += [multi_values(twin.joints, k / steps) for k in range(1, steps) if k * 3 % steps]
+    base = multi_values(twin.joints, 0.0)
+    for j in twin.joints:
+        lo, hi = (j.limits if j.limits is not None else (0.0, np.pi / 2))
+        for t in (0.25, 0.5, 0.75):
+            v = dict(base)
+            v[j.name] = lo + t * (hi - lo)
+            vals.append(v)
     return vals
 
 

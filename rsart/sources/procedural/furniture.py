@@ -169,11 +169,18 @@ def add_door(b: ObjectBuilder, parent: int, name: str, o: Opening, y_front: floa
     p = b.part(name)
     lo = np.array([o.x0 - overlay, y_front - GAP - thickness, o.z0 - overlay])
     hi = np.array([o.x1 + overlay, y_front - GAP, o.z1 + overlay])
-    b.add(p, S.box_between(lo, hi), panel)
     free = -np.asarray(_UNIT[hinge_side], float)
+    # Opening, the free edge's back corner first swings *out* sideways by up to t²/(2w) (w = panel
+    # width): trim the free edge by that much so a facing door (double doors) is never touched.
+    k = int(np.argmax(np.abs(free)))
+    trim = thickness**2 / (2 * (hi[k] - lo[k])) + 0.001
+    if free[k] > 0:
+        hi[k] -= trim
+    else:
+        lo[k] += trim
+    b.add(p, S.box_between(lo, hi), panel)
     c = (lo + hi) / 2
     size = hi - lo
-    k = int(np.argmax(np.abs(free)))
     grip = c.copy()
     grip[k] += free[k] * (size[k] / 2 - min(0.05, 0.2 * size[k]))
     grip[1] = lo[1]

@@ -160,7 +160,7 @@ def make_eyeglasses(b: ObjectBuilder, rng: np.random.Generator, n_movable: int |
         b.add(p, S.bar(start, end, tw, th), temple_m)
         tip = end + np.array([0.0, bend, -(zh - 0.004)])
         b.add(p, S.bar(end - np.array([0, 0.002, 0]), tip, tw, th, up=(0, 1, 0.5)), temple_m)
-        tilt = 0.0 if side == "right" else 0.4
+        tilt = 0.0 if side == "right" else 0.6
         axis = np.array([0.0, np.sin(tilt), np.cos(tilt)]) * (1 if sx > 0 else -1)
         b.revolute(f"temple_{side}_hinge", base, p, axis, (hx, yh, zh), (0.0, round(np.pi / 2 - 0.05, 4)))
 
