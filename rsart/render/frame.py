@@ -11,14 +11,13 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
-import trimesh
 
 from ..camera import REALSENSE_D435_COLOR_640x480, Camera, Intrinsics
 from ..errors import RsartError
 from ..kinematics import Twin
 from .booth import BACKGROUNDS, BoothSpec, booth_meshes, random_background
-from .raster import Lighting, PyrenderRgb, RaycastShader, resolve_backend
-from .raycast import RayHits, build_scene
+from .raster import Lighting, PyrenderRgb, RaycastShader, resolve_backend, shared_renderer
+from .raycast import SCENE_LABEL, RayHits, build_scene
 from .sensor import ColourSensorModel, DepthSensorModel, realsense_colour, realsense_depth
 
 
@@ -78,6 +77,7 @@ class StateRenderer:
 
     ``object_bounds`` (2, 3) and ``camera_radius`` place the booth (pass the same values for every
     state of an object so its booth does not move). ``nthreads``: ray-casting threads (0 = all).
+    ``rgb_renderer``: a GL renderer to use instead of the process-wide one (:func:`shared_renderer`).
     """
 
     def __init__(self, twin: Twin, values: dict[str, float], options: RenderOptions,
@@ -91,18 +91,20 @@ class StateRenderer:
         scene = booth_meshes(object_bounds, camera_radius, options.booth) if options.background == "booth" else []
         self.scene = build_scene(parts, scene, nthreads=nthreads)
         self.backend = resolve_backend(options.rgb_backend)
+        # booth pixels are shaded from the ray-cast hits (flat green, no textures): rasterising the
+        # full-screen booth doubled the GL time under llvmpipe; the object alone is rasterised
+        self._shader = RaycastShader(options.lighting)
+        self._shader.set_scene(self.scene.meshes)
         size = float(np.linalg.norm(np.ptp(object_bounds, axis=0)))
         # a near plane well in front of the object keeps 24-bit GL depth precise to ~1e-6 of the distance
         znear, zfar = 0.05 * camera_radius, 10 * (size + 4 * camera_radius)
         if self.backend == "raycast":
-            self._shader = RaycastShader(options.lighting)
-            self._shader.set_scene(self.scene.meshes)
             self._raster = None
         else:
             K = options.intrinsics
-            self._raster = rgb_renderer or PyrenderRgb(K.width, K.height, self.backend.split("-", 1)[1],
-                                                       options.lighting, options.antialias)
-            self._raster.set_scene(list(self.scene.meshes), znear, zfar)
+            self._raster = rgb_renderer or shared_renderer(K.width, K.height, self.backend.split("-", 1)[1],
+                                                           options.lighting, options.antialias)
+            self._raster.set_scene([m for ms in parts for m in ms], znear, zfar)
 
     def render(self, c2w: np.ndarray, rng: np.random.Generator) -> Frame:
         """Render the view with camera-to-world ``c2w`` (4, 4, OpenCV); ``rng`` drives backgrounds/noise."""
@@ -114,10 +116,10 @@ class StateRenderer:
         if self._raster is not None:
             rgb, alpha = self._raster.render(cam)
             if alpha is None:
-                alpha = hits.hit.astype(np.float32)
+                alpha = (hits.label >= 0).astype(np.float32)
         else:
-            rgb, alpha = self._shader.shade(hits)
-        rgb = self._background(rgb, alpha, rng)
+            rgb, alpha = self._shader.shade(hits, hits.label >= 0)
+        rgb = self._background(rgb, alpha, hits, rng)
         frame = Frame(rgb, depth, mask, hits)
         if opt.sensor:
             frame.rgb_clean, frame.depth_clean = rgb, depth
@@ -127,8 +129,8 @@ class StateRenderer:
                                           opt.depth_model)
         return frame
 
-    def _background(self, rgb: np.ndarray, alpha: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        """Put the premultiplied ``rgb`` (coverage ``alpha``) over the chosen background."""
+    def _background(self, rgb: np.ndarray, alpha: np.ndarray, hits: RayHits, rng: np.random.Generator) -> np.ndarray:
+        """Put the premultiplied object ``rgb`` (coverage ``alpha``) over the chosen background."""
         opt = self.options
         H, W = alpha.shape
         if opt.background == "transparent":
@@ -141,23 +143,20 @@ class StateRenderer:
             bg = random_background(H, W, rng)
         elif opt.background == "plain":
             bg = np.broadcast_to(np.asarray(opt.plain_colour, dtype=np.uint8), (H, W, 3))
-        else:  # booth: only the open top of the curtain can be uncovered
-            bg = np.broadcast_to(np.asarray(opt.booth.curtain_colour, dtype=np.uint8), (H, W, 3))
+        else:  # booth: shaded booth hits; the open top of the curtain (never in view at 30-60°) curtain-coloured
+            booth = hits.label == SCENE_LABEL
+            bg, _ = self._shader.shade(hits, booth)
+            bg[~booth] = opt.booth.curtain_colour
         out = rgb.astype(np.float32) + bg.astype(np.float32) * (1 - alpha[..., None])
         return np.clip(np.round(out), 0, 255).astype(np.uint8)
 
     @property
     def raster(self) -> PyrenderRgb | None:
-        """The GL renderer (None with the ray-cast backend); reusable for the next state's scene."""
+        """The GL renderer (None with the ray-cast backend); shared by every state of this process."""
         return self._raster
 
     def close(self) -> None:
-        if self._raster is not None:
-            self._raster.close()
+        """Release this state's scenes (the process-wide GL renderer stays for the next state)."""
+        self.scene = None
+        self._shader = None
 
-
-def meshes_for(twin: Twin, values: dict[str, float], geometry: str) -> list[list[trimesh.Trimesh]]:
-    """Per part, the posed meshes the renderer uses for ``geometry`` "visual" | "mesh"."""
-    if geometry == "visual":
-        return twin.posed_visuals(values)
-    return [[m] for m in twin.posed_meshes(values)]

@@ -108,8 +108,10 @@ def _linear_colours(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
 
 # ----------------------------------------------------------------------------- pyrender
 def _disable_msaa(pyrender_renderer_module) -> None:
-    """Make pyrender sample once per pixel centre: it enables GL_MULTISAMPLE on every pass and has no
-    option against it, so its module-level ``glEnable`` is wrapped to ignore that one capability."""
+    """Make pyrender sample once per pixel centre: it enables GL_MULTISAMPLE on every pass and allocates
+    4-sample buffers, with no option against either, so its module-level ``glEnable`` (for that one
+    capability) and ``glRenderbufferStorageMultisample`` (sample count) are wrapped. The flag
+    ``_rsart_antialias`` on the module switches them (set per renderer before it allocates/renders)."""
     from OpenGL import GL
 
     mod = pyrender_renderer_module
@@ -123,7 +125,14 @@ def _disable_msaa(pyrender_renderer_module) -> None:
             return None
         return original(cap)
 
+    storage = mod.glRenderbufferStorageMultisample
+
+    def gl_storage(target, samples, fmt, width, height):
+        # without antialiasing, single-sample buffers: llvmpipe then shades and resolves 4x fewer samples
+        return storage(target, samples if getattr(mod, "_rsart_antialias", True) else 0, fmt, width, height)
+
     mod.glEnable = gl_enable
+    mod.glRenderbufferStorageMultisample = gl_storage
     mod._rsart_msaa_wrapped = True
 
 
@@ -199,6 +208,24 @@ class PyrenderRgb:
         self._renderer.delete()
 
 
+_SHARED: dict[tuple[int, int, bool], PyrenderRgb] = {}
+
+
+def shared_renderer(width: int, height: int, platform: str, lighting: Lighting = Lighting(),
+                    antialias: bool = False) -> PyrenderRgb:
+    """The process-wide renderer for this image size and antialiasing (created once, never deleted).
+
+    pyrender's EGL platform terminates the process's shared EGL display when any renderer is deleted,
+    which breaks every other live renderer; keeping one renderer per configuration avoids that.
+    """
+    key = (width, height, antialias)
+    r = _SHARED.get(key)
+    if r is None:
+        r = _SHARED[key] = PyrenderRgb(width, height, platform, lighting, antialias)
+    r.lighting = lighting
+    return r
+
+
 # ----------------------------------------------------------------------------- ray-cast shading
 @dataclass
 class Albedo:
@@ -260,20 +287,45 @@ class RaycastShader:
     def set_scene(self, meshes: list[trimesh.Trimesh]) -> None:
         """``meshes`` in the same order as the geometries of the :class:`RaycastScene` whose hits are shaded."""
         self._albedo = [Albedo.of(m) for m in meshes]
+        # face-coloured geometries share one uint8 sRGB table indexed by offset[geometry] + triangle
+        self._flat = np.array([a.face_colour is not None for a in self._albedo] + [False], dtype=bool)
+        tables = [np.round(a.face_colour * 255).astype(np.uint8) if a.face_colour is not None
+                  else np.zeros((0, 3), np.uint8) for a in self._albedo]
+        self._offset = np.concatenate([[0], np.cumsum([len(t) for t in tables])]).astype(np.int64)
+        self._table = np.concatenate(tables + [np.zeros((1, 3), np.uint8)], axis=0)
 
-    def shade(self, hits: RayHits) -> tuple[np.ndarray, np.ndarray]:
-        """(H, W, 3) uint8 RGB premultiplied over black and (H, W) float32 coverage (0 or 1)."""
+    def shade(self, hits: RayHits, select: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """(H, W, 3) uint8 RGB premultiplied over black and (H, W) float32 coverage (0 or 1).
+
+        ``select`` (H, W) bool limits shading to those pixels (others count as not hit).
+        Works on the hit pixels only, with sRGB look-up tables (this runs for every frame).
+        """
         H, W = hits.depth.shape
-        rgb = np.zeros((H, W, 3), dtype=np.float64)
-        hit = hits.hit
-        base = np.zeros((int(hit.sum()), 3))
-        g, p, b = hits.geometry[hit], hits.primitive[hit], hits.bary[hit]
-        for gi in np.unique(g):
-            sel = g == gi
-            base[sel] = self._albedo[gi].sample(p[sel], b[sel])
+        hit = hits.hit if select is None else hits.hit & select
+        idx = np.flatnonzero(hit)
+        g = hits.geometry.reshape(-1)[idx]
+        p = hits.primitive.reshape(-1)[idx]
+        flat = self._flat[g]
+        base = self._table[np.where(flat, self._offset[g] + p, len(self._table) - 1)]
+        if not flat.all():
+            rest = np.flatnonzero(~flat)
+            b = hits.bary.reshape(-1, 2)[idx[rest]]
+            gr, pr = g[rest], p[rest]
+            for gi in np.unique(gr):
+                sel = gr == gi
+                col = self._albedo[gi].sample(pr[sel], b[sel])
+                base[rest[sel]] = np.clip(np.round(col * 255), 0, 255).astype(np.uint8)
+        d = hits.ray_dir.reshape(-1, 3)[idx]
+        n = hits.normal.reshape(-1, 3)[idx]
+        cos = np.abs(np.einsum("ij,ij->i", d, n)) / np.sqrt(np.einsum("ij,ij->i", d, d))
         # shaded in linear light like pyrender (diffuse BRDF albedo/pi times the light intensity), sRGB output
-        lam = self.lighting.ambient + self.lighting.headlight / np.pi * hits.cos_incidence()[hit]
-        rgb[hit] = srgb_to_linear(base) * lam[:, None]
-        out = np.clip(np.round(linear_to_srgb(rgb) * 255), 0, 255).astype(np.uint8)
-        out[~hit] = 0
-        return out, hit.astype(np.float32)
+        lam = (self.lighting.ambient + self.lighting.headlight / np.pi * cos).astype(np.float32)
+        lin = _SRGB_TO_LINEAR[base] * lam[:, None]
+        out = np.zeros((H * W, 3), dtype=np.uint8)
+        out[idx] = _LINEAR_TO_SRGB[np.minimum((lin * (_LUT_N - 1) + 0.5).astype(np.int32), _LUT_N - 1)]
+        return out.reshape(H, W, 3), hit.astype(np.float32)
+
+
+_LUT_N = 4096
+_SRGB_TO_LINEAR = srgb_to_linear(np.arange(256) / 255.0).astype(np.float32)
+_LINEAR_TO_SRGB = np.round(linear_to_srgb(np.arange(_LUT_N) / (_LUT_N - 1)) * 255).astype(np.uint8)

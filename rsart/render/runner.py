@@ -166,7 +166,7 @@ def pending_tasks(plan: ObjectPlan, twin: Twin, job: RenderJob, chunk: int = 8) 
 
 
 # ----------------------------------------------------------------------------- rendering (runs in workers)
-_WORKER: dict = {"key": None, "renderer": None, "raster": None, "nthreads": 0}
+_WORKER: dict = {"key": None, "renderer": None, "nthreads": 0}
 
 
 def init_worker(nthreads: int) -> None:
@@ -179,19 +179,11 @@ def render_task(task: ViewTask) -> int:
     from .frame import StateRenderer
 
     job = task.job
-    key = (task.obj_dir, task.state_id, repr(job.options))
-    if _WORKER["key"] != key:
-        raster = _WORKER["raster"]
-        K, opt = job.options.intrinsics, job.options
-        if raster is not None and (raster.width, raster.height, raster.antialias, raster.lighting) != (
-                K.width, K.height, opt.antialias, opt.lighting):
-            raster.close()
-            raster = None
+    key = (task.obj_dir, task.state_id, repr(job.options), sorted(task.values.items()), task.radius)
+    if _WORKER["key"] != key:  # scenes are built once per state and process
         sr = StateRenderer(task.twin, task.values, job.options, task.bounds, task.radius,
-                           nthreads=_WORKER["nthreads"], rgb_renderer=raster)
-        if raster is not None and sr.raster is None:
-            raster.close()
-        _WORKER.update(key=key, renderer=sr, raster=sr.raster)
+                           nthreads=_WORKER["nthreads"])
+        _WORKER.update(key=key, renderer=sr)
     sr = _WORKER["renderer"]
     sdir = Path(task.obj_dir) / "states" / task.state_id
     for vid, c2w in task.views:
