@@ -104,7 +104,6 @@ def make_faucet(b: ObjectBuilder, rng: np.random.Generator, n_movable: int | Non
     b.add(base, S.box_between((-0.11, -0.045, 0), (0.11, 0.045, 0.012)), chrome)
     b.add(base, S.cylinder(R, Hb, (0, 0, Hb / 2 + 0.011)), chrome)
     hx = uniform(rng, 0.07, 0.085)
-    zh = uniform(rng, 0.04, 0.06)
     for sx in (-1, 1):
         b.add(base, S.cylinder(0.013, 0.03, (sx * hx, 0, 0.011 + 0.015), (0, 0, 1)), chrome)   # handle bodies
     for i, (side, sx) in enumerate((("left", -1), ("right", 1))):
@@ -115,7 +114,6 @@ def make_faucet(b: ObjectBuilder, rng: np.random.Generator, n_movable: int | Non
         b.add(p, S.bar(top + (0, 0, 0.012), top + (0, -arm, 0.02), 0.012, 0.008), chrome)
         b.add(p, S.cylinder(0.008, 0.004, top + (0, 0, 0.0145), (0, 0, 1)), accent)
         b.revolute(f"handle_{side}_turn", 0, p, (0, 0, sx), top, (0.0, round(rng.uniform(1.2, 1.57), 3)))
-    del zh
     reach = uniform(rng, 0.10, 0.15)
     rise = uniform(rng, 0.06, 0.12)
     r_tube = 0.011

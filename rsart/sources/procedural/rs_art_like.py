@@ -11,7 +11,7 @@ import numpy as np
 
 from . import shapes as S
 from .builder import ObjectBuilder
-from .furniture import GAP, Opening, Palette, add_door, add_drawer, carcass, grid_openings, uniform
+from .furniture import GAP, Opening, Palette, add_door, add_drawer, carcass, grid_openings, hinge_axis, uniform
 
 
 def make_drawer(b: ObjectBuilder, rng: np.random.Generator, n_movable: int | None) -> None:
@@ -93,8 +93,7 @@ def make_desk_lamp(b: ObjectBuilder, rng: np.random.Generator, n_movable: int | 
         stem_end = wrist + np.array([0.0, -0.05, -0.01])
         b.add(part, S.bar(wrist, stem_end, w * 0.8, w * 0.8, up=(1, 0, 0)), metal)
         top = stem_end + np.array([0.0, -0.01, -0.005])
-        shade = S.cylinder(0.018, shade_h, top + np.array([0, 0, -shade_h / 2]), (0, 0, 1), 28,
-                           radius_top=None)
+        shade = S.cylinder(0.018, shade_h, top + np.array([0, 0, -shade_h / 2]), (0, 0, 1), 28)
         cone = S.subtract(S.cylinder(shade_r, shade_h, top + np.array([0, 0, -shade_h / 2]), (0, 0, -1), 28,
                                      radius_top=0.02),
                           [S.cylinder(shade_r - 0.004, shade_h, top + np.array([0, 0, -shade_h / 2 - 0.004]),
@@ -108,7 +107,7 @@ def make_desk_lamp(b: ObjectBuilder, rng: np.random.Generator, n_movable: int | 
         add_head(head, q2 + np.array([-(w + GAP), 0, 0]))
         b.revolute("wrist", arm2, head, (1, 0, 0), q2, (-0.6, 0.5))
     else:
-        add_head(arm2, wrist - np.array([0.0, -0.0, 0.0]))
+        add_head(arm2, wrist)
 
 
 def make_eyeglasses(b: ObjectBuilder, rng: np.random.Generator, n_movable: int | None, style: str = "rs") -> None:
@@ -240,7 +239,7 @@ def make_woven_basket(b: ObjectBuilder, rng: np.random.Generator, n_movable: int
         lid = b.part("lid")
         b.add(lid, S.box_between(lo, hi), weave)
         b.add(lid, S.bar((-0.04, -D / 2 + 0.03, hi[2] - 0.001), (0.04, -D / 2 + 0.03, hi[2] - 0.001), 0.012, 0.012), rim_m)
-        axis, origin = _lid_axis(lo, hi, "+y")
+        axis, origin = hinge_axis(lo, hi, "+z", "+y")
         b.revolute("lid_hinge", 0, lid, axis, origin, (0.0, round(rng.uniform(1.6, 1.85), 3)))
     else:
         b.add(base, S.box((0.02, D + 0.008, 0.012), (0, 0, H + 0.006 - 0.0005)), rim_m)     # centre rail
@@ -251,14 +250,8 @@ def make_woven_basket(b: ObjectBuilder, rng: np.random.Generator, n_movable: int
                 lo[0], hi[0] = -W / 2 - 0.002, -0.01 - GAP
             lid = b.part(f"lid_{side}")
             b.add(lid, S.box_between(lo, hi), weave)
-            axis, origin = _lid_axis(lo, hi, "-x" if sx > 0 else "+x")
+            axis, origin = hinge_axis(lo, hi, "+z", "-x" if sx > 0 else "+x")
             b.revolute(f"lid_{side}_hinge", 0, lid, axis, origin, (0.0, round(rng.uniform(1.2, 1.45), 3)))  # hinged at the centre: stop short of vertical
-
-
-def _lid_axis(lo, hi, hinge_side: str):
-    from .furniture import hinge_axis
-
-    return hinge_axis(lo, hi, "+z", hinge_side)
 
 
 def make_stand(b: ObjectBuilder, rng: np.random.Generator, n_movable: int | None) -> None:
