@@ -203,9 +203,7 @@ def discover(field_or_model: Any, obj, config: DiscoveryConfig | None = None) ->
     diag["seconds"] = time.perf_counter() - t0
     diag["joints"] = {p.name: {"type": p.joint.type, "type_paper": p.joint.type_paper, "type_bic": p.joint.type_bic,
                                **p.joint.diagnostics} for p in parts if p.joint is not None}
-    res = ObjectResult(obj.meta.object_id, parts, {sid: meshes[sid][1] for sid in mesh_states}, diag)
-    res.diagnostics["field"] = fld
-    return res
+    return ObjectResult(obj.meta.object_id, parts, {sid: meshes[sid][1] for sid in mesh_states}, diag, fld)
 
 
 def discover_safe(field_or_model: Any, obj, config: DiscoveryConfig | None = None) -> ObjectResult | ObjectFailure:

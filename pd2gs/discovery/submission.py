@@ -43,6 +43,7 @@ class ObjectResult:
     parts: list[PartResult]
     whole: dict[str, trimesh.Trimesh] = field(default_factory=dict)
     diagnostics: dict[str, Any] = field(default_factory=dict)
+    field: Any = None  # the refined, labelled StateField (for pictures); not written
 
 
 class ObjectFailure(Exception):

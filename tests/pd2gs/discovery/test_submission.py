@@ -91,3 +91,9 @@ def test_pipeline_end_to_end_scores(data, tmp_path):
     assert m["axis_ang"] < 1.0 and m["axis_pos"] < 0.1     # x10 scene units: < 1 cm
     # x1000 squared metres; the fixture's 96x72 views have ~1.4 cm pixels at the object (measured 6.5)
     assert m["cd_w"] < 10.0 and m["cd_s"] < 10.0
+    # pictures: parts + axes panel and the control strip (kinematic, no latent interpolation here)
+    from PIL import Image
+    from pd2gs.discovery.pictures import save_pictures
+    save_pictures(res, obj, tmp_path / "pic.png", steps=3)
+    w, h = Image.open(tmp_path / "pic.png").size
+    assert w > 600 and h > 300
