@@ -9,13 +9,9 @@ plumbing: locating the object, choosing the protocol's rendered states, and repo
 """
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
-
-from rsart.errors import RsartError
-from rsart.format import ObjectMeta, read_index, read_meta
 
 from . import __version__
 
@@ -56,28 +52,6 @@ class ImportReport:
         lines = [f"{self.method}: imported {self.object_id} into {self.submission} (parts: {', '.join(self.parts)})"]
         lines += [f"  note: {n}" for n in self.notes]
         return "\n".join(lines)
-
-
-def find_object(object_ref: str | os.PathLike, data: str | os.PathLike | None = None) -> Path:
-    """The object folder named by ``object_ref``: a folder with meta.json, or an object id inside ``data``
-    (a dataset root with index.json, or an object folder whose id it is)."""
-    p = Path(object_ref)
-    if (p / "meta.json").is_file():
-        return p
-    if data is None:
-        raise RsartError(f"{object_ref}: not an object folder (no meta.json); pass --data ROOT to look the id up")
-    root = Path(data)
-    if (root / "meta.json").is_file():
-        meta = read_meta(root)
-        if meta.object_id == str(object_ref):
-            return root
-        raise RsartError(f"{root}: holds object {meta.object_id!r}, not {object_ref!r}")
-    if (root / "index.json").is_file():
-        idx = read_index(root / "index.json")
-        if str(object_ref) not in idx.objects:
-            raise RsartError(f"{root}: no object {object_ref!r} in index.json")
-        return root / str(object_ref)
-    raise RsartError(f"{root}: neither a dataset root (index.json) nor an object folder (meta.json)")
 
 
 def render_hint(object_dir: Path, protocol: str) -> str:
@@ -128,6 +102,3 @@ class Adapter:
     def __repr__(self) -> str:
         return f"<adapter {self.name}: {self.title}, {self.protocol}>"
 
-
-def load_meta(object_dir: Path) -> ObjectMeta:
-    return read_meta(object_dir)
