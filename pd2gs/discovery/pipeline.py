@@ -221,3 +221,17 @@ def method_block(cfg: DiscoveryConfig, states_used: int | None = None) -> dict:
             "states_used": states_used if states_used is not None else (cfg.n_states or "all"),
             "discovery": {"counter": cfg.counter, "refine": cfg.refine, "mask_provider": cfg.mask_provider,
                           "joint_rule": cfg.joint_rule, "n_states": cfg.n_states}}
+
+
+def dataset_block(data: str) -> dict:
+    """The submission's ``dataset`` object for a dataset root (``index.json``: name, version), or {} for a
+    single object folder (then rsart-eval checks no name)."""
+    from pathlib import Path
+
+    from rsart.format import read_index
+
+    idx = Path(data) / "index.json"
+    if not idx.is_file():
+        return {}
+    index = read_index(idx)
+    return {"name": index.name, "version": index.version}

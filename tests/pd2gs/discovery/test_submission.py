@@ -97,3 +97,14 @@ def test_pipeline_end_to_end_scores(data, tmp_path):
     save_pictures(res, obj, tmp_path / "pic.png", steps=3)
     w, h = Image.open(tmp_path / "pic.png").size
     assert w > 600 and h > 300
+
+
+def test_state_selection_and_dataset_block(data):
+    from pd2gs.discovery.pipeline import dataset_block, used_states
+    obj = rsart.load(data / "cabinet-0000")
+    ids = [s.id for s in obj.meta.states]
+    assert used_states(obj, ids, 2) == ["m0", "m3"]
+    assert used_states(obj, ids, 4) == ["m0", "m1", "m2", "m3"]
+    assert used_states(obj, ["m3", "m0", "m2"], None) == ["m0", "m2", "m3"]     # meta.json order
+    assert dataset_block(str(data)) == {"name": "disc-test", "version": "1"}
+    assert dataset_block(str(data / "cabinet-0000")) == {}
