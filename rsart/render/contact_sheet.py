@@ -101,8 +101,8 @@ def render_sheet(obj_dir: str | Path, out_png: str | Path, views_per_state: int 
             depth = read_depth_png(sdir / "depth" / f"{v.id}.png", cams.depth_scale)
             mask = read_mask_png(sdir / "mask" / f"{v.id}.png")
             rgb = draw_axes(rgb, cams.camera(i), axes, length)
-            obj = depth[mask > 0]
-            lo_d, hi_d = (float(obj.min()), float(obj.max())) if obj.size else (None, None)
+            obj = depth[(mask > 0) & (depth > 0)]  # colour range of the object's own depth
+            lo_d, hi_d = (float(np.percentile(obj, 1)), float(np.percentile(obj, 99))) if obj.size else (None, None)
             row = [_label(rgb, f"{sid} {v.id} {v.split}"), colour_depth(depth, lo_d, hi_d), colour_mask(mask)]
             tiles.extend(row)
         h = int(round(tile_width * rgb.shape[0] / rgb.shape[1]))

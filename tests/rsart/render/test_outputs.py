@@ -1,0 +1,100 @@
+"""Backgrounds, sensor outputs, URDF input, contact sheet, Ray backend."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from rsart.cli.render import main
+from rsart.io import read_depth_png, read_mask_png, read_png_rgb
+from rsart.render.booth import booth_meshes
+from rsart.render.frame import RenderOptions, StateRenderer
+from rsart.render.paths import fit_radius, orbit_pose
+from rsart.twin_io import write_object
+from rsart.verify import verify
+
+SMALL = ["--size", "160x120", "--no-progress", "--workers", "1"]
+
+
+def _render(twin, intr, **kw):
+    values = {"door_hinge": 0.8, "drawer_slide": 0.1}
+    b = twin.bounds(values)
+    r = fit_radius(b, intr)
+    sr = StateRenderer(twin, values, RenderOptions(intrinsics=intr, rgb_backend="raycast", **kw), b, r)
+    return sr.render(orbit_pose(b.mean(0), r, 0.5, 0.7), np.random.default_rng(0))
+
+
+def test_booth_is_background_in_the_mask_but_seen_by_depth(locker, small_intrinsics):
+    f = _render(locker, small_intrinsics, background="booth")
+    assert np.all(f.depth > 0)  # floor, curtain and pedestal fill every pixel at 30-60° elevation
+    off = f.mask == 0
+    green = f.rgb[off].astype(int)
+    assert np.mean(green[:, 1] > green[:, 0] + 40) > 0.95  # chroma-key green around the object
+    lo = locker.bounds({"door_hinge": 0.8, "drawer_slide": 0.1})
+    _, pedestal = booth_meshes(lo, 1.0)
+    assert pedestal.bounds[1][2] < lo[0][2] and pedestal.extents[0] >= 0.5
+
+
+def test_transparent_and_random_backgrounds(locker, small_intrinsics):
+    t = _render(locker, small_intrinsics, background="transparent")
+    assert t.rgb.shape[-1] == 4 and np.array_equal(t.rgb[..., 3] > 0, t.mask > 0)
+    r1 = _render(locker, small_intrinsics, background="random")
+    assert r1.rgb.shape[-1] == 3 and r1.rgb[r1.mask == 0].std() > 5
+    assert np.array_equal(r1.rgb[r1.mask > 0], t.rgb[..., :3][t.mask > 0])  # the object is the same
+
+
+def test_sensor_keeps_clean_ground_truth(locker, small_intrinsics):
+    f = _render(locker, small_intrinsics, background="plain", sensor=True)
+    assert f.rgb_clean is not None and not np.array_equal(f.rgb, f.rgb_clean)
+    valid = f.depth > 0
+    assert 0.5 < valid.sum() / (f.depth_clean > 0).sum() < 1  # some pixels lost, most kept
+    assert np.all(f.depth_clean[valid] > 0)
+    err = np.abs(f.depth[valid] - f.depth_clean[valid])
+    assert 0 < np.median(err) < 0.02
+
+
+def test_urdf_input_renders_with_sensor_folders(locker, tmp_path):
+    src = tmp_path / "src"
+    write_object(locker, src, object_id="locker", category="storage", source={"kind": "procedural", "id": "t"},
+                 write_usd=False)
+    out = tmp_path / "out"
+    assert main([str(src / "twin" / "object.urdf"), "--out", str(out), "--protocol", "two-state", "--views", "1",
+                 "--test-views", "0", "--sensor", "--rgb-backend", "raycast", *SMALL]) == 0
+    obj = out / "object"
+    for kind in ("rgb", "depth", "mask", "rgb_clean", "depth_clean"):
+        assert (obj / "states" / "m0" / kind / "0000.png").is_file()
+    assert read_mask_png(obj / "states/m3/mask/0000.png").max() >= 2
+    assert read_depth_png(obj / "states/m3/depth_clean/0000.png").max() > 0
+    assert verify(out).ok
+
+
+def test_contact_sheet(locker, tmp_path):
+    from rsart.render.contact_sheet import render_sheet
+
+    src = tmp_path / "src" / "locker"
+    write_object(locker, src, object_id="locker", category="storage", source={"kind": "procedural", "id": "t"},
+                 write_usd=False)
+    out = tmp_path / "out"
+    assert main([str(src), "--out", str(out), "--views", "2", "--test-views", "1", "--rgb-backend", "raycast",
+                 *SMALL]) == 0
+    png = render_sheet(out / "locker", tmp_path / "sheet.png", views_per_state=2, tile_width=100)
+    img = read_png_rgb(png)
+    assert img.shape == (4 * (75 + 2), 6 * 100, 3)  # 4 states x (2 views x RGB|depth|mask)
+    assert img.std() > 20
+
+
+def test_ray_backend(locker, tmp_path):
+    ray = pytest.importorskip("ray", reason="ray is an optional extra (pip install ray)")
+    src = tmp_path / "src" / "locker"
+    write_object(locker, src, object_id="locker", category="storage", source={"kind": "procedural", "id": "t"},
+                 write_usd=False)
+    ray.init(num_cpus=2, include_dashboard=False)
+    try:
+        assert main([str(src), "--out", str(tmp_path / "a"), "--views", "2", "--test-views", "0",
+                     "--backend", "ray", "--rgb-backend", "raycast", "--size", "160x120", "--no-progress"]) == 0
+    finally:
+        ray.shutdown()
+    assert main([str(src), "--out", str(tmp_path / "b"), "--views", "2", "--test-views", "0",
+                 "--rgb-backend", "raycast", *SMALL]) == 0
+    for p in sorted((tmp_path / "a" / "locker" / "states").rglob("*.png")):
+        q = tmp_path / "b" / p.relative_to(tmp_path / "a")
+        assert p.read_bytes() == q.read_bytes()
