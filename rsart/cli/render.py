@@ -37,7 +37,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("render", help="render RGB-D captures (RGB, depth, part masks) of a twin",
                        description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("input", nargs="?", type=Path, help="object folder, dataset root, .urdf or .usd file")
-    p.add_argument("--suite", help="render a whole suite (e.g. rsart-synth) into OUT")
+    p.add_argument("--suite", help="render a whole suite (rsart-synth) in OUT: generated there first if OUT is "
+                                   "empty, else OUT must be that suite's root (rendered in place)")
     p.add_argument("--out", type=Path, required=True, help="output dataset root")
     p.add_argument("--protocol", choices=PROTOCOLS, default="pd2gs", help="which states and views (default pd2gs)")
     p.add_argument("--size", default="640x480", help="image WIDTHxHEIGHT (intrinsics scaled; default 640x480)")
@@ -105,23 +106,22 @@ def build_job(args):
                      train_path=args.path, options=opts, path=PathSpec(fill=args.fill))
 
 
-def _suite_dirs(name: str, out: Path, overwrite: bool) -> list[Path]:
+def _suite_dirs(name: str, out: Path, overwrite: bool, workers: int) -> list[Path]:
+    """Object folders of suite ``name`` at ``out``: rendered in place, generated first if ``out`` is empty."""
     from ..errors import RsartError
-    from ..format import read_index
     from ..render.inputs import object_dirs
 
-    if (out / "index.json").is_file():
-        return object_dirs(out, out, overwrite)
-    try:
-        from ..sources.procedural import registry
-    except ImportError:
-        registry = None
-    gen = getattr(registry, "generate_suite", None)
-    if gen is None:
-        raise RsartError(f"suite {name!r}: generate it first (`rsart generate --suite {name} --out {out}`), "
-                         f"then run this command again to render it")
-    gen(name, out)
-    return object_dirs(out, out, overwrite) if read_index(out) else []
+    if not (out / "index.json").is_file():
+        from ..sources.procedural.suite import SUITE_NAME, write_suite
+
+        if name != SUITE_NAME:
+            raise RsartError(f"unknown suite {name!r} (known: {SUITE_NAME})")
+        if out.exists() and any(out.iterdir()):
+            raise RsartError(f"--out {out}: neither empty nor a dataset root (index.json); "
+                             f"give an empty folder to generate {name} into")
+        print(f"generating {name} into {out} ...", file=sys.stderr)
+        write_suite(out, workers=workers, overwrite=out.exists())
+    return object_dirs(out, out, overwrite)
 
 
 def _render(args) -> int:
@@ -136,9 +136,12 @@ def _render(args) -> int:
     out: Path = args.out
     if out.exists() and not out.is_dir():
         raise RsartError(f"--out {out}: exists and is not a folder")
-    out.mkdir(parents=True, exist_ok=True)
-    dirs = _suite_dirs(args.suite, out, args.overwrite) if args.suite else object_dirs(args.input, out, args.overwrite)
     workers = args.workers or default_workers()
+    if args.suite:
+        dirs = _suite_dirs(args.suite, out, args.overwrite, workers)
+    else:
+        out.mkdir(parents=True, exist_ok=True)
+        dirs = object_dirs(args.input, out, args.overwrite)
     backend = resolve_backend(job.options.rgb_backend)
     print(f"rsart render: {len(dirs)} object(s), protocol {job.protocol}, RGB via {backend}, "
           f"{workers} worker(s) ({args.backend})", file=sys.stderr)

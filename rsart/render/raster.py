@@ -157,7 +157,8 @@ class PyrenderRgb:
 
     def __init__(self, width: int, height: int, platform: str, lighting: Lighting = Lighting(),
                  antialias: bool = False) -> None:
-        os.environ.setdefault("PYOPENGL_PLATFORM", platform)
+        if "OpenGL" not in sys.modules:  # PyOpenGL fixes its platform at first import
+            os.environ["PYOPENGL_PLATFORM"] = platform
         os.environ.setdefault("MUJOCO_GL", platform)
         import pyrender
         import pyrender.renderer

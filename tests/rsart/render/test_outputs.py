@@ -98,3 +98,21 @@ def test_ray_backend(locker, tmp_path):
     for p in sorted((tmp_path / "a" / "locker" / "states").rglob("*.png")):
         q = tmp_path / "b" / p.relative_to(tmp_path / "a")
         assert p.read_bytes() == q.read_bytes()
+
+
+def test_suite_root_is_rendered_in_place(tmp_path):
+    from rsart.format import read_index
+    from rsart.sources.procedural.suite import suite_items, write_suite
+
+    root = tmp_path / "synth"
+    write_suite(root, workers=1, items=suite_items()[:1])
+    before = read_index(root)
+    assert main(["--suite", "rsart-synth", "--out", str(root), "--protocol", "two-state", "--views", "1",
+                 "--test-views", "0", "--rgb-backend", "raycast", *SMALL]) == 0
+    after = read_index(root)
+    assert after.objects == before.objects and after.splits["all"] == before.objects
+    oid = before.objects[0]
+    assert (root / oid / "states" / "m3" / "rgb" / "0000.png").is_file() and verify(root).ok
+    (tmp_path / "junk").mkdir()
+    (tmp_path / "junk" / "x.txt").write_text("x")
+    assert main(["--suite", "rsart-synth", "--out", str(tmp_path / "junk"), *SMALL]) == 2
