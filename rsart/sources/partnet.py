@@ -42,9 +42,14 @@ from .urdf_twin import (WatertightConfig, check_geometry, conversion_notes, fold
 URDF_NAME = "mobility.urdf"
 MAX_JSON_BYTES = 20 * 1024 * 1024
 _SAFE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]{0,127}$")
+#: rotation taking the "rotated to z-up" frame of PARIS/DTArt/ArtGS ground truth (their ``R_coord``, +90° about x
+#: applied to the y-up annotation frame) to rsart's world frame: a further -90° about z (the URDF root joint's
+#: rpy (π/2, 0, -π/2) = Rz(-π/2)·Rx(π/2)). ``p_rsart = PARIS_ZUP_TO_WORLD @ p_paris``; no translation.
+PARIS_ZUP_TO_WORLD = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
 WORLD_FRAME_NOTE = ("URDF base frame of mobility.urdf at rest (all joints 0), z up: PartNet-Mobility's root "
                     "fixed joint (rpy = pi/2, 0, -pi/2) turns the y-up annotation frame of mobility_v2.json "
-                    "into it, as SAPIEN loads the object")
+                    "into it, as SAPIEN loads the object; PARIS/DTArt 'rotated to z-up' ground truth = this frame turned "
+                    "+90 degrees about z (p_paris = Rz(+90) p_rsart)")
 
 
 @dataclass

@@ -18,7 +18,7 @@ import trimesh
 import rsart
 from rsart.cli import main
 from rsart.format import read_meta
-from rsart.sources.partnet import split_ids
+from rsart.sources.partnet import PARIS_ZUP_TO_WORLD, split_ids
 
 IDS = ["100162", "100676", "101326", "101940", "148", "3763", "45213", "8867"]
 RES = ["--resolution", "64", "-q"]
@@ -232,3 +232,11 @@ def test_pd2gs_paper_split(partnet_root, tmp_path, capsys):
     assert "converted 1/12" in cap.out and "missing" in cap.err and "102373" in cap.err
     idx = json.loads((out / "index.json").read_text())
     assert idx["splits"] == {"pd2gs-paper": ["pm-100676"]}
+
+
+def test_world_frame_relates_to_the_paris_z_up_frame(partnet_root):
+    """PARIS/DTArt turn the y-up annotation frame by R_coord (+90° about x); the URDF root joint adds -90° about z."""
+    r_coord = np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]])
+    for i in IDS:
+        R = _root_rotation(_xml(partnet_root, i))
+        np.testing.assert_allclose(R, PARIS_ZUP_TO_WORLD @ r_coord, atol=1e-12)

@@ -206,3 +206,24 @@ def test_watertight_copy_of_an_open_sheet_is_closed_and_close():
     d = np.abs(trimesh.sample.sample_surface(wt, 2000, seed=0)[0][:, 2])
     assert np.all(d < 1.5 * level)
     assert info["chamfer_vs_original"] < info["chamfer_floor"] + 2000 * level ** 2 * 1.5
+
+
+def test_convert_usd_cli_roundtrip_and_bad_file(urdf_dir, tmp_path, capsys):
+    """`rsart convert usd` is wired to rsart.sources.usd_twin.convert_usd: the USD rsart writes comes back."""
+    (urdf_dir / "robot.urdf").write_text(_good())
+    first = tmp_path / "a"
+    assert main(["convert", "urdf", str(urdf_dir / "robot.urdf"), "--out", str(first), *FAST]) == 0
+    back = tmp_path / "b"
+    assert main(["convert", "usd", str(first / "twin" / "object.usda"), "--out", str(back), "--category", "box"]) == 0
+    a, b = read_meta(first), read_meta(back)
+    assert b.source["kind"] == "usd" and b.category == "box"
+    (ja,), (jb,) = a.joints, b.joints
+    assert jb.type == ja.type and jb.limits == pytest.approx(ja.limits)
+    np.testing.assert_allclose(jb.axis, ja.axis, atol=1e-6)
+    np.testing.assert_allclose(np.cross(jb.origin - ja.origin, ja.axis), 0, atol=1e-6)  # same axis line
+    bad = tmp_path / "bad.usda"
+    bad.write_text("#usda 1.0\nthis is not usd (\n")
+    capsys.readouterr()
+    assert main(["convert", "usd", str(bad), "--out", str(tmp_path / "c")]) == 2
+    err = capsys.readouterr().err
+    assert "bad.usda" in err and "Traceback" not in err and not (tmp_path / "c").exists()
