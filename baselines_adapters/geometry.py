@@ -1,10 +1,18 @@
 """Frames and rigid-motion helpers shared by the adapters.
 
-Frames: rsart's world is the object base frame, z up (docs/format.md). The peers' ground truth
-(PARIS ``trans.json`` and GT meshes, reused by DTArt and ArtGS) is z-up too — PARIS rotates
-PartNet-Mobility's y-up frame by +90° about x before writing it — so the default method frame is
-rsart's world unchanged. ``y-up`` is offered for method builds that keep PartNet's raw y-up frame;
-every exported pose, axis and mesh then goes through :data:`Y_UP_FROM_Z_UP`, and importers undo it.
+Frames: rsart's world is the object base frame, z up (docs/format.md). The methods train on the
+exported cameras, so any consistent world frame works for them; the frame matters only to compare
+with the peers' own data. Three method frames are offered:
+
+* ``z-up`` (default): rsart's world unchanged.
+* ``paris``: the peers' "rotated to z-up" ground-truth frame of PartNet-Mobility objects (PARIS
+  ``preprocess.py``, reused by DTArt and ArtGS). For an object converted from PartNet-Mobility it is
+  rsart's world turned +90° about z (``rsart.sources.partnet.PARIS_ZUP_TO_WORLD``, the one owner of
+  that relation).
+* ``y-up``: PartNet-Mobility's y-up annotation frame, i.e. the ``paris`` frame turned back by PARIS's
+  ``R_coord`` (+90° about x).
+
+Every exported pose, axis and mesh goes through the chosen frame and importers undo it.
 
 Cameras: conversions between OpenCV and OpenGL/Blender camera axes go through
 :class:`rsart.camera.Camera` (the one converter); this module only changes the *world* frame.
@@ -23,11 +31,16 @@ from scipy.spatial.transform import Rotation
 from rsart.errors import RsartError
 from rsart.kinematics import joint_motion, rotation_matrix
 
-#: PartNet-Mobility's y-up frame -> the peers' z-up GT frame (+90° about x): (x, y, z) -> (x, -z, y).
+#: PARIS's ``R_coord``: PartNet's y-up annotation frame -> the peers' z-up GT frame (+90° about x).
 Z_UP_FROM_Y_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
-#: rsart's z-up world -> a y-up method frame (the inverse rotation).
 Y_UP_FROM_Z_UP = Z_UP_FROM_Y_UP.T
-FRAMES = ("z-up", "y-up")
+FRAMES = ("z-up", "paris", "y-up")
+
+
+def _paris_from_world() -> np.ndarray:
+    from rsart.sources.partnet import PARIS_ZUP_TO_WORLD
+
+    return PARIS_ZUP_TO_WORLD.T
 
 
 @dataclass(frozen=True)
@@ -41,8 +54,10 @@ class MethodFrame:
     def named(name: str) -> "MethodFrame":
         if name == "z-up":
             return MethodFrame(name, np.eye(3))
+        if name == "paris":
+            return MethodFrame(name, _paris_from_world())
         if name == "y-up":
-            return MethodFrame(name, Y_UP_FROM_Z_UP.copy())
+            return MethodFrame(name, Y_UP_FROM_Z_UP @ _paris_from_world())
         raise RsartError(f"unknown method frame {name!r} (choose from {', '.join(FRAMES)})")
 
     @property

@@ -8,7 +8,7 @@
 ``trans.json``: ``{"input": {...}, "trans_info": {"axis": {"o", "d"}, "type": "rotate"|"translate",
 "rotate"|"translate": {"l": start, "r": end}}}`` — ``trans_info`` is a list with one entry per moving
 joint when there are several. Values ``l``/``r`` are **degrees** for ``rotate`` and scene units for
-``translate``; ``o``/``d`` are in the method frame (z-up, like rsart's world) at the start state.
+``translate``; ``o``/``d`` are in the method frame (geometry.MethodFrame) at the start state.
 Every number is written as a float (DTArt's ``list_to_array`` returns None for JSON integers). The
 suffix ``_rotate`` means "rotated to z-up", not a revolute joint.
 """

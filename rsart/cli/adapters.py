@@ -26,8 +26,8 @@ GROUP = "rsart.adapters"
 _CONVENTIONS = """\
 Conventions: rsart objects use metres and radians, a z-up world (the object base frame) and OpenCV
 cameras. Exporters convert to each method's own conventions (OpenGL/Blender camera axes, degrees in
-trans.json, millimetre depth PNGs, the peers' z-up GT frame; --frame y-up for builds that keep
-PartNet-Mobility's raw y-up frame) and importers convert back."""
+trans.json, millimetre depth PNGs; --frame paris|y-up to land in the peers' PartNet-Mobility GT frame or
+PartNet's y-up annotation frame) and importers convert back."""
 
 
 def discover() -> dict[str, tuple[Any, str]]:
@@ -79,7 +79,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     pe.add_argument("object", type=Path, help="object folder (meta.json + rendered states)")
     pe.add_argument("--method", required=True, help="adapter name (see `rsart adapters list`)")
     pe.add_argument("--out", type=Path, required=True, help="output folder (created atomically)")
-    pe.add_argument("--frame", default="z-up", choices=("z-up", "y-up"), help="method world frame (default z-up)")
+    pe.add_argument("--frame", default="z-up", choices=("z-up", "paris", "y-up"),
+                    help="method world frame: z-up = rsart's world (default); paris = the peers' z-up GT frame of "
+                         "PartNet-Mobility objects; y-up = PartNet's y-up annotation frame")
     pe.add_argument("--overwrite", action="store_true", help="replace an existing OUT")
     pe.set_defaults(func=_export)
 
@@ -93,7 +95,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     pi.add_argument("--object", required=True, help="object id (with --data) or object folder")
     pi.add_argument("--data", type=Path, help="dataset root (index.json) or object folder holding OBJECT")
     pi.add_argument("--into", type=Path, required=True, help="submission JSON to create or update")
-    pi.add_argument("--frame", default="z-up", choices=("z-up", "y-up"), help="method world frame used at export")
+    pi.add_argument("--frame", default="z-up", choices=("z-up", "paris", "y-up"),
+                    help="method world frame used at export (default z-up)")
     pi.add_argument("--method-version", help="version of the method's code (recorded in the submission)")
     pi.add_argument("--failed", metavar="REASON", help="record the object as failed (null entry) instead of reading RUN_DIR")
     pi.set_defaults(func=_import)

@@ -1,4 +1,4 @@
-"""Conventions survive export -> method frame -> import: y-up vs z-up, degrees vs radians, axis sign,
+"""Conventions survive export -> method frame -> import: y-up / paris / z-up, degrees vs radians, axis sign,
 OpenGL vs OpenCV (the per-view pose checks live in the per-method tests)."""
 from __future__ import annotations
 
@@ -14,19 +14,28 @@ from rsart.kinematics import joint_motion, rotation_matrix
 from tests.baselines_adapters.ba_helpers import GL_FLIP, play_artgs, play_dtart, play_paris, read_json, score
 
 
-def test_y_up_matches_partnet_preprocessing():
-    """PARIS's preprocessing maps PartNet's y-up to z-up with +90° about x; y-up export is its inverse."""
+def test_frames_match_partnet_preprocessing():
+    """paris = rsart's world turned +90° about z (PartNet objects); y-up = paris turned back by PARIS's
+    R_coord (+90° about x): up stays up, and the PartNet front is the inverse of SAPIEN's root joint."""
     np.testing.assert_allclose(Z_UP_FROM_Y_UP, rotation_matrix(np.array([1.0, 0, 0]), math.pi / 2), atol=1e-15)
     np.testing.assert_allclose(Z_UP_FROM_Y_UP @ Y_UP_FROM_Z_UP, np.eye(3), atol=1e-15)
-    fr = MethodFrame.named("y-up")
-    np.testing.assert_allclose(fr.dirs_to_method([0.0, 0.0, 1.0]), [0.0, 1.0, 0.0], atol=1e-15)  # up stays up
+    paris, yup = MethodFrame.named("paris"), MethodFrame.named("y-up")
+    np.testing.assert_allclose(paris.R, rotation_matrix(np.array([0, 0, 1.0]), math.pi / 2), atol=1e-15)
+    np.testing.assert_allclose(yup.R, Y_UP_FROM_Z_UP @ paris.R, atol=1e-15)
+    np.testing.assert_allclose(paris.dirs_to_method([0.0, 0.0, 1.0]), [0.0, 0.0, 1.0], atol=1e-15)
+    np.testing.assert_allclose(yup.dirs_to_method([0.0, 0.0, 1.0]), [0.0, 1.0, 0.0], atol=1e-15)  # up is +y
+    # rsart world = SAPIEN's URDF base frame = Rz(-90) Rx(+90) applied to the y-up annotation frame
+    sapien_root = rotation_matrix(np.array([0, 0, 1.0]), -math.pi / 2) @ rotation_matrix(np.array([1.0, 0, 0]), math.pi / 2)
+    np.testing.assert_allclose(yup.R, sapien_root.T, atol=1e-15)
 
 
-@pytest.mark.parametrize("method,key", [("paris", "cabinet/single-joint"), ("dtart", "cabinet/two-state"),
-                                        ("artgs", "cabinet/two-state")])
-def test_y_up_export_import_round_trip(method, key, objects, tmp_path):
+@pytest.mark.parametrize("method,key,frame", [("paris", "cabinet/single-joint", "y-up"),
+                                              ("dtart", "cabinet/two-state", "y-up"),
+                                              ("artgs", "cabinet/two-state", "paris")])
+def test_frame_export_import_round_trip(method, key, frame, objects, tmp_path):
     out = tmp_path / "export"
-    get_adapter(method).export(objects[key], out, frame="y-up")
+    R = MethodFrame.named(frame).R
+    get_adapter(method).export(objects[key], out, frame=frame)
     meta = rsart.load(objects[key]).meta
     lid = meta.joint("lid_hinge")
     if method == "paris":
@@ -44,18 +53,18 @@ def test_y_up_export_import_round_trip(method, key, objects, tmp_path):
         trans = read_json(out / "gt" / "trans.json")["trans_info"][0]
         gl, sid = np.array(read_json(out / "transforms_train_start.json")["frames"][0]["transform_matrix"]), "m0"
         run = play_artgs(out, tmp_path / "run")
-    # the method sees the hinge axis and the camera in its y-up frame
-    np.testing.assert_allclose(trans["axis"]["d"], Y_UP_FROM_Z_UP @ lid.axis, atol=1e-12)
-    np.testing.assert_allclose(trans["axis"]["o"], Y_UP_FROM_Z_UP @ lid.origin, atol=1e-12)
+    # the method sees the hinge axis and the camera in its frame
+    np.testing.assert_allclose(trans["axis"]["d"], R @ lid.axis, atol=1e-12)
+    np.testing.assert_allclose(trans["axis"]["o"], R @ lid.origin, atol=1e-12)
     c2w = rsart.load(objects[key]).states[sid].split("train")[0].camera.c2w
-    np.testing.assert_allclose((gl @ GL_FLIP)[:3, 3], Y_UP_FROM_Z_UP @ c2w[:3, 3], atol=1e-12)
-    np.testing.assert_allclose((gl @ GL_FLIP)[:3, :3], Y_UP_FROM_Z_UP @ c2w[:3, :3], atol=1e-12)
+    np.testing.assert_allclose((gl @ GL_FLIP)[:3, 3], R @ c2w[:3, 3], atol=1e-12)
+    np.testing.assert_allclose((gl @ GL_FLIP)[:3, :3], R @ c2w[:3, :3], atol=1e-12)
     # ... and what it returns in that frame comes back unchanged
     sub = tmp_path / f"{method}.json"
-    get_adapter(method).import_run(run, objects[key], sub, frame="y-up")
+    get_adapter(method).import_run(run, objects[key], sub, frame=frame)
     m = score(sub, objects[key])["metrics"]
     assert m["axis_ang"] < 1e-4 and m["axis_pos"] < 1e-5 and m["part_motion_rev"] < 1e-4 and m["part_motion_pri"] < 1e-6
-    # importing y-up results as if they were z-up is caught by the scores (the frame matters)
+    # importing them as if they were in rsart's frame is caught by the scores (the frame matters)
     get_adapter(method).import_run(run, objects[key], sub, frame="z-up")
     wrong = {p["name"]: p["metrics"] for p in score(sub, objects[key])["parts"]}
     assert max(w["axis_ang"] for w in wrong.values()) == pytest.approx(90.0, abs=1e-6), wrong
