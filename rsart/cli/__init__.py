@@ -49,7 +49,21 @@ def build_parser() -> argparse.ArgumentParser:
                 continue
             raise
         mod.register(sub)
+    _register_plugins(sub)
     return parser
+
+
+def _register_plugins(sub) -> None:
+    """Subcommands from other installed packages: entry points in group ``rsart.commands``, each a callable
+    ``register(subparsers)`` (rsart imports none of those packages itself). A broken plug-in is reported."""
+    from importlib.metadata import entry_points
+
+    for ep in sorted(entry_points(group="rsart.commands"), key=lambda e: e.name):
+        try:
+            ep.load()(sub)
+        except Exception as e:  # one broken plug-in must not break the CLI
+            print(f"warning: rsart.commands plug-in {ep.name!r} ({ep.value}) failed: {type(e).__name__}: {e}",
+                  file=sys.stderr)
 
 
 def run(func, args) -> int:

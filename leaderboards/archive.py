@@ -1,0 +1,130 @@
+"""Safe extraction of an uploaded submission archive (zip).
+
+Refused, with a message naming the entry: not a zip; too many entries; an absolute path, a drive letter,
+a backslash, a NUL or a ``..`` component (zip-slip); a symlink or any non-regular entry; duplicate names;
+a declared or an *actual* uncompressed size over the limit; a compression ratio over ``max_ratio``
+(zip bomb — sizes are counted while inflating, the headers are not trusted). Extraction goes to a
+temporary sibling folder renamed into place only when complete.
+"""
+from __future__ import annotations
+
+import os
+import shutil
+import stat
+import tempfile
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path, PurePosixPath
+
+from rsart.errors import RsartError
+
+CHUNK = 1 << 16
+
+
+class ArchiveError(RsartError):
+    """An unsafe or unusable archive; the message names the entry."""
+
+
+@dataclass(frozen=True)
+class ArchiveLimits:
+    max_upload_bytes: int = 200 * 1024 ** 2     # the zip itself
+    max_unpacked_bytes: int = 1024 ** 3         # everything inflated
+    max_entries: int = 20000
+    max_ratio: float = 200.0                    # inflated / compressed, per entry (only above 1 MiB)
+
+
+def _check_name(name: str) -> PurePosixPath:
+    if not name or "\x00" in name or "\\" in name:
+        raise ArchiveError(f"entry {name!r}: invalid characters in the name")
+    p = PurePosixPath(name)
+    if p.is_absolute() or (len(name) > 1 and name[1] == ":"):
+        raise ArchiveError(f"entry {name!r}: absolute path")
+    if any(part == ".." for part in p.parts):
+        raise ArchiveError(f"entry {name!r}: '..' escapes the archive folder (zip-slip)")
+    return p
+
+
+def _entry_kind(info: zipfile.ZipInfo) -> str:
+    mode = info.external_attr >> 16
+    if mode and stat.S_ISLNK(mode):
+        return "symlink"
+    if info.is_dir():
+        return "dir"
+    if mode and not stat.S_ISREG(mode):
+        return "special"
+    return "file"
+
+
+def extract_zip(zip_path: str | Path, dest: str | Path, limits: ArchiveLimits = ArchiveLimits()) -> Path:
+    """Extract ``zip_path`` into the new folder ``dest`` (must not exist) → ``dest``; ArchiveError if unsafe."""
+    zip_path, dest = Path(zip_path), Path(dest)
+    if zip_path.stat().st_size > limits.max_upload_bytes:
+        raise ArchiveError(f"archive is {zip_path.stat().st_size} bytes; the limit is {limits.max_upload_bytes}")
+    if not zipfile.is_zipfile(zip_path):
+        raise ArchiveError("the upload is not a zip archive")
+    if dest.exists():
+        raise ArchiveError(f"{dest}: already exists")
+    tmp = Path(tempfile.mkdtemp(prefix=f".{dest.name}.", suffix=".partial", dir=dest.parent))
+    try:
+        with zipfile.ZipFile(zip_path) as zf:
+            infos = zf.infolist()
+            if len(infos) > limits.max_entries:
+                raise ArchiveError(f"archive has {len(infos)} entries; the limit is {limits.max_entries}")
+            seen: set[str] = set()
+            declared = 0
+            for info in infos:
+                p = _check_name(info.filename)
+                kind = _entry_kind(info)
+                if kind in ("symlink", "special"):
+                    raise ArchiveError(f"entry {info.filename!r}: {kind} entries are not allowed")
+                key = str(p).rstrip("/")
+                if key in seen and kind != "dir":
+                    raise ArchiveError(f"entry {info.filename!r}: duplicate name")
+                seen.add(key)
+                declared += info.file_size
+            if declared > limits.max_unpacked_bytes:
+                raise ArchiveError(f"archive unpacks to {declared} bytes; the limit is {limits.max_unpacked_bytes}")
+            total = 0
+            root = tmp.resolve()
+            for info in infos:
+                p = _check_name(info.filename)
+                target = (tmp / p).resolve()
+                if root != target and root not in target.parents:
+                    raise ArchiveError(f"entry {info.filename!r}: escapes the archive folder")
+                if info.is_dir():
+                    target.mkdir(parents=True, exist_ok=True)
+                    continue
+                target.parent.mkdir(parents=True, exist_ok=True)
+                written = 0
+                with zf.open(info) as src, open(target, "xb") as dst:
+                    while True:
+                        buf = src.read(CHUNK)
+                        if not buf:
+                            break
+                        written += len(buf)
+                        total += len(buf)
+                        if total > limits.max_unpacked_bytes:
+                            raise ArchiveError(f"entry {info.filename!r}: archive unpacks to more than "
+                                               f"{limits.max_unpacked_bytes} bytes (zip bomb?)")
+                        if written > 1 << 20 and written > limits.max_ratio * max(info.compress_size, 1):
+                            raise ArchiveError(f"entry {info.filename!r}: compression ratio above "
+                                               f"{limits.max_ratio:.0f} (zip bomb?)")
+    except zipfile.BadZipFile as e:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise ArchiveError(f"corrupt zip archive: {e}") from None
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    os.replace(tmp, dest)
+    return dest
+
+
+def find_submission_file(folder: Path) -> Path:
+    """``submission.json`` at the archive root, or inside its single top-level folder."""
+    top = folder / "submission.json"
+    if top.is_file():
+        return top
+    subs = [p for p in folder.iterdir() if p.is_dir() and not p.name.startswith("__MACOSX")]
+    if len(subs) == 1 and (subs[0] / "submission.json").is_file():
+        return subs[0] / "submission.json"
+    raise ArchiveError("no submission.json at the archive root (or in its single top-level folder)")

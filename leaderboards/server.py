@@ -1,0 +1,254 @@
+"""``rsart leaderboard serve``: the submission server (FastAPI on uvicorn) and its live leaderboard page.
+
+API (docs/leaderboard.md):
+
+* ``POST /api/submissions`` — header ``Authorization: Bearer <token>``, multipart field ``archive`` = a zip
+  holding ``submission.json`` and its meshes → ``202 {"job_id", "status": "queued"}``. Errors: 401 (no or
+  bad token), 411 (no Content-Length), 413 (too large), 422 (unsafe archive or invalid submission, with
+  ``problems`` listing each JSON path), 429 (rate limit; ``Retry-After``).
+* ``GET /api/jobs/{id}`` — ``queued | running | done | failed`` (+ ``error`` / ``submission_id``).
+* ``GET /api/leaderboard`` — computed rows as JSON; ``GET /api/version`` — counts the live page polls.
+* ``GET /`` — the live leaderboard (same tables as the static site; reloads when a new score lands).
+
+Uploads are written atomically (temp + rename) under ``<work>/``; the queue is the database's ``jobs``
+table, so a crash or restart loses nothing (``recover`` requeues interrupted jobs at start-up).
+"""
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+import threading
+from dataclasses import dataclass
+from pathlib import Path
+
+from fastapi import FastAPI, Request
+from fastapi.concurrency import run_in_threadpool
+from fastapi.responses import HTMLResponse, JSONResponse
+
+from . import jobs as J
+from .archive import ArchiveError, ArchiveLimits, extract_zip, find_submission_file
+from .html import page
+from .schema import MEAN, open_engine
+from .store import count_submissions, list_submissions
+from .worker import ScoringSettings
+
+UPLOAD_PATH = "/api/submissions"
+
+LIVE_JS = """
+(function(){var n=0,seen=null;function tick(){if(++n>2400)return;fetch('api/version',{cache:'no-store'})
+.then(function(r){return r.json();}).then(function(v){var k=v.submissions+':'+v.done;if(seen===null)seen=k;
+else if(k!==seen){location.reload();return;}setTimeout(tick,1500);}).catch(function(){setTimeout(tick,3000);});}
+setTimeout(tick,1500);})();
+"""
+
+
+@dataclass(frozen=True)
+class ServerConfig:
+    db: str
+    data: Path
+    work: Path
+    archive: ArchiveLimits = ArchiveLimits()
+    scoring: ScoringSettings = ScoringSettings()
+
+
+def _error(status: int, message: str, problems: list | None = None, headers: dict | None = None) -> JSONResponse:
+    body: dict = {"error": message}
+    if problems is not None:
+        body["problems"] = problems
+    return JSONResponse(body, status_code=status, headers=headers)
+
+
+class BodyLimit:
+    """ASGI middleware: uploads need a Content-Length (411) no larger than the limit (413), checked before
+    any byte of the body is read; uvicorn enforces the declared length, so the body cannot exceed it."""
+
+    def __init__(self, app, limit: int):
+        self.app, self.limit = app, limit
+
+    async def __call__(self, scope, receive, send):
+        if scope["type"] == "http" and scope["path"] == UPLOAD_PATH and scope["method"] == "POST":
+            hdr = dict(scope["headers"]).get(b"content-length")
+            resp = None
+            if hdr is None:
+                resp = _error(411, "Content-Length is required for uploads")
+            elif not hdr.isdigit() or int(hdr) > self.limit:
+                resp = _error(413, f"upload too large: {hdr.decode(errors='replace')} bytes; the limit is {self.limit}")
+            if resp is not None:
+                await resp(scope, receive, send)
+                return
+        await self.app(scope, receive, send)
+
+
+def create_app(cfg: ServerConfig) -> FastAPI:
+    from rsart.evaluation.ground_truth import load_ground_truth
+    from rsart.evaluation.submission import Limits, read_submission
+
+    engine = open_engine(cfg.db)
+    gt = load_ground_truth(cfg.data)
+    limits = Limits(max_mesh_bytes=int(cfg.scoring.max_mesh_mb * 1024 ** 2), max_total_bytes=cfg.archive.max_unpacked_bytes)
+    for d in ("incoming", "jobs"):
+        (cfg.work / d).mkdir(parents=True, exist_ok=True)
+    rate_lock = threading.Lock()
+    app = FastAPI(title="rsart leaderboard", docs_url=None, redoc_url=None, openapi_url=None)
+
+    def _auth(request: Request) -> dict | None:
+        h = request.headers.get("authorization", "")
+        if not h.lower().startswith("bearer "):
+            return None
+        return J.lookup_token(engine, h[7:].strip())
+
+    def _validate(job_id: str, zip_path: Path) -> tuple[Path, Path, str]:
+        folder = cfg.work / "jobs" / job_id / "submission"
+        folder.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            extract_zip(zip_path, folder, cfg.archive)
+            sub_file = find_submission_file(folder)
+            sub, problems = read_submission(sub_file, gt, limits)
+            if problems or sub is None:
+                raise _Invalid(problems)
+            return folder, sub_file, str(sub.method.get("name", ""))
+        except BaseException:
+            shutil.rmtree(folder.parent, ignore_errors=True)
+            raise
+        finally:
+            zip_path.unlink(missing_ok=True)
+
+    @app.post(UPLOAD_PATH)
+    async def upload(request: Request):
+        token = _auth(request)
+        if token is None:
+            return _error(401, "missing or invalid token (header: Authorization: Bearer <token>)",
+                          headers={"WWW-Authenticate": "Bearer"})
+        if J.uploads_last_hour(engine, token["id"]) >= token["rate_per_hour"]:
+            return _error(429, f"rate limit: {token['rate_per_hour']} uploads per hour for this token",
+                          headers={"Retry-After": "3600"})
+        ctype = request.headers.get("content-type", "")
+        if not ctype.startswith("multipart/form-data"):
+            return _error(422, "send the zip as multipart/form-data field 'archive'")
+        form = await request.form(max_files=1, max_fields=4)
+        up = form.get("archive")
+        if up is None or isinstance(up, str):
+            return _error(422, "multipart field 'archive' (the zip file) is missing")
+        job_id = J.new_job_id()
+        part = cfg.work / "incoming" / f"{job_id}.zip.partial"
+        dest = cfg.work / "incoming" / f"{job_id}.zip"
+        try:
+            with open(part, "wb") as f:
+                await run_in_threadpool(shutil.copyfileobj, up.file, f, 1 << 20)
+                f.flush()
+                os.fsync(f.fileno())
+            os.replace(part, dest)
+        finally:
+            part.unlink(missing_ok=True)
+            await form.close()
+        try:
+            folder, sub_file, method = await run_in_threadpool(_validate, job_id, dest)
+        except ArchiveError as e:
+            return _error(422, f"unsafe or unusable archive: {e}")
+        except _Invalid as e:
+            return _error(422, f"invalid submission: {len(e.problems)} problem(s)",
+                          problems=[{"path": p.path, "message": p.message} for p in e.problems])
+        with rate_lock:  # re-check under the lock so concurrent uploads cannot overrun the limit
+            if J.uploads_last_hour(engine, token["id"]) >= token["rate_per_hour"]:
+                shutil.rmtree(folder.parent, ignore_errors=True)
+                return _error(429, f"rate limit: {token['rate_per_hour']} uploads per hour for this token",
+                              headers={"Retry-After": "3600"})
+            J.enqueue(engine, job_id, token, str(folder), str(sub_file), method)
+        return JSONResponse({"job_id": job_id, "status": "queued", "method": method}, status_code=202)
+
+    @app.get("/api/jobs/{job_id}")
+    def job_status(job_id: str):
+        j = J.get_job(engine, job_id) if job_id.isalnum() else None
+        if j is None:
+            return _error(404, f"no job {job_id!r}")
+        return {k: j[k] for k in ("id", "status", "error", "submission_id", "method_name", "team", "attempts")}
+
+    @app.get("/api/version")
+    def version():
+        q = J.queue_counts(engine)
+        return {"submissions": count_submissions(engine), "done": q.get("done", 0), "queue": q}
+
+    @app.get("/api/leaderboard")
+    def leaderboard():
+        return [{"id": s.id, "method": s.method_name, "version": s.method_version, "team": s.team,
+                 "dataset": s.dataset_label, "track": s.track, "n_objects": s.n_objects,
+                 "n_failed_objects": s.n_failed_objects,
+                 "mean": {m: {"value": v, "n": n, "n_failed": nf} for m, (v, n, nf) in s.agg.get(MEAN, {}).items()}}
+                for s in list_submissions(engine)]
+
+    @app.get("/", response_class=HTMLResponse)
+    def live():
+        from .exports import index_body
+
+        body = ('<p class="note">Live page: reloads when a new submission is scored. Upload: '
+                '<code>curl -H "Authorization: Bearer $TOKEN" -F archive=@sub.zip HOST/api/submissions</code>.</p>'
+                + index_body(engine, list_submissions(engine)))
+        return page("rsart leaderboard (live)", body, extra_js=LIVE_JS)
+
+    @app.get("/published.html", response_class=HTMLResponse)
+    def published():
+        from .exports import published_page
+
+        return published_page()
+
+    @app.get("/metrics.html", response_class=HTMLResponse)
+    def metrics():
+        from .site import metrics_page
+
+        return metrics_page()
+
+    @app.get("/healthz")
+    def healthz():
+        return {"ok": True}
+
+    return BodyLimit(app, cfg.archive.max_upload_bytes + 64 * 1024)
+
+
+class _Invalid(Exception):
+    def __init__(self, problems):
+        super().__init__(f"{len(problems)} problems")
+        self.problems = problems
+
+
+def start_workers(cfg: ServerConfig, n: int) -> list[subprocess.Popen]:
+    """``n`` worker processes (python -m leaderboards.worker) that exit when this process dies."""
+    s = cfg.scoring
+    procs = []
+    for i in range(n):
+        argv = [sys.executable, "-m", "leaderboards.worker", "--db", cfg.db, "--data", str(cfg.data),
+                "--work", str(cfg.work), "--name", f"w{i}-{os.getpid()}", "--parent-pid", str(os.getpid()),
+                "--chamfer-samples", str(s.chamfer_samples), "--chamfer-seeds", ",".join(map(str, s.chamfer_seeds)),
+                "--states", s.states, "--max-mesh-mb", str(s.max_mesh_mb)]
+        procs.append(subprocess.Popen(argv, env={**os.environ, "PYTHONPATH": _pythonpath()}))
+    return procs
+
+
+def _pythonpath() -> str:
+    root = str(Path(__file__).resolve().parent.parent)
+    old = os.environ.get("PYTHONPATH", "")
+    return root + (os.pathsep + old if old else "")
+
+
+def serve(cfg: ServerConfig, host: str = "127.0.0.1", port: int = 8000, workers: int = 2) -> int:
+    """Recover the queue, start the workers, run uvicorn until interrupted."""
+    import uvicorn
+
+    engine = open_engine(cfg.db)
+    n = J.recover(engine)
+    if n:
+        print(f"requeued {n} interrupted job(s)", file=sys.stderr)
+    app = create_app(cfg)
+    procs = start_workers(cfg, workers)
+    try:
+        uvicorn.run(app, host=host, port=port, log_level="warning", timeout_graceful_shutdown=5)
+    finally:
+        for p in procs:
+            p.terminate()
+        for p in procs:
+            try:
+                p.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                p.kill()
+    return 0
