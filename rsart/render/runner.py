@@ -144,7 +144,7 @@ def write_plan(plan: ObjectPlan, job: RenderJob, overwrite: bool = False) -> Non
     for sid, cams in plan.cameras.items():
         sdir = obj / "states" / sid
         sdir.mkdir(parents=True, exist_ok=True)
-        for tmp in sdir.glob("*/.*.tmp"):  # leftovers of a killed run (never a real output file)
+        for tmp in [*sdir.glob(".*.tmp"), *sdir.glob("*/.*.tmp")]:  # leftovers of a killed run
             tmp.unlink(missing_ok=True)
         cpath = sdir / "cameras.json"
         if not cpath.exists() or read_json(cpath) != json.loads(dumps_json(cameras_to_dict(cams))):
@@ -175,7 +175,20 @@ def init_worker(nthreads: int) -> None:
 
 
 def render_task(task: ViewTask) -> int:
-    """Render and write the views of ``task``; returns the number of views written."""
+    """Render and write the views of ``task``; returns the number of views written.
+
+    Any failure is re-raised as :class:`RsartError` naming the object, state and view.
+    """
+    try:
+        return _render_task(task)
+    except RsartError:
+        raise
+    except Exception as e:  # a worker's traceback is no use to a CLI user: say what failed where
+        raise RsartError(f"{task.obj_dir}: state {task.state_id}: rendering failed "
+                         f"({type(e).__name__}: {e})") from e
+
+
+def _render_task(task: ViewTask) -> int:
     from .frame import StateRenderer
 
     job = task.job
