@@ -34,7 +34,7 @@ class BoothSpec:
 
 
 def booth_meshes(object_bounds: np.ndarray, camera_radius: float, spec: BoothSpec = BoothSpec()) -> list[trimesh.Trimesh]:
-    """Floor + curtain + pedestal meshes (world frame) for an object with (2, 3) ``object_bounds``.
+    """Curtain, floor and pedestal meshes (world frame, in that order) for an object with (2, 3) ``object_bounds``.
 
     The pedestal is at least ``pedestal_size`` wide and 10% wider than the object's footprint; its top lies
     0.2% of the object's diagonal below the object's lowest point (about 1 mm: invisible, but it keeps the
@@ -57,12 +57,17 @@ def booth_meshes(object_bounds: np.ndarray, camera_radius: float, spec: BoothSpe
 
     curtain = trimesh.creation.cylinder(radius=radius, height=wall_h, sections=96)
     curtain.apply_translation((cx, cy, floor + wall_h / 2))
-    keep = curtain.face_normals[:, 2] < 0.5  # drop the top cap: the booth is open above (lights)
-    curtain.update_faces(keep)
+    # walls only: the booth is open above (lights), and the floor is a separate square -- the cylinder's
+    # bottom cap is a fan of 96 slivers meeting at the centre, which made ray casting ~3x slower
+    curtain.update_faces(np.abs(curtain.face_normals[:, 2]) < 0.5)
     curtain.remove_unreferenced_vertices()
     curtain.invert()  # normals face inwards, towards the cameras
     curtain.visual.face_colors = (*spec.curtain_colour, 255)
-    return [curtain, pedestal]
+    r = 1.05 * radius
+    floor_sq = trimesh.Trimesh([[cx - r, cy - r, floor], [cx + r, cy - r, floor], [cx + r, cy + r, floor],
+                                [cx - r, cy + r, floor]], [[0, 1, 2], [0, 2, 3]], process=False)
+    floor_sq.visual.face_colors = (*spec.curtain_colour, 255)
+    return [curtain, floor_sq, pedestal]
 
 
 def random_background(height: int, width: int, rng: np.random.Generator) -> np.ndarray:

@@ -30,7 +30,7 @@ class RenderOptions:
     ``sensor``: apply the RealSense-like depth/colour model; the clean images are then kept in
     ``rgb_clean/`` and ``depth_clean/`` as ground truth.
     ``reconcile`` (without ``antialias``): where the rasteriser and the ray caster disagree about a
-    pixel's coverage -- about one pixel per view on real meshes, where a pixel centre grazes an edge --
+    pixel's coverage -- 0-2 pixels per 640x480 view, where a pixel centre grazes an edge or corner --
     the RGB follows the ray cast (that pixel is ray-shaded or made background), so RGB, depth and mask
     agree everywhere; ``Frame.reconciled`` counts such pixels.
     """
