@@ -109,6 +109,7 @@ def extract_zip(zip_path: str | Path, dest: str | Path, limits: ArchiveLimits = 
                         if written > 1 << 20 and written > limits.max_ratio * max(info.compress_size, 1):
                             raise ArchiveError(f"entry {info.filename!r}: compression ratio above "
                                                f"{limits.max_ratio:.0f} (zip bomb?)")
+                        dst.write(buf)
     except zipfile.BadZipFile as e:
         shutil.rmtree(tmp, ignore_errors=True)
         raise ArchiveError(f"corrupt zip archive: {e}") from None
