@@ -4,7 +4,7 @@ Layout written under a dataset root ``out`` (DESIGN.md §6.1)::
 
     out/index.json, out/checksums.sha256
     out/<object_id>/meta.json               (+ states the protocol added, e.g. unseen ones)
-    out/<object_id>/render.json             the settings of this render (protocol, seed, options)
+    out/<object_id>/render.json             the settings of each protocol rendered here (seed, options, ...)
     out/<object_id>/twin/...                copied from the input object folder / written from URDF/USD
     out/<object_id>/states/<sid>/cameras.json
     out/<object_id>/states/<sid>/{rgb,depth,mask}/<view>.png   (+ rgb_clean/, depth_clean/ with --sensor)
@@ -12,7 +12,8 @@ Layout written under a dataset root ``out`` (DESIGN.md §6.1)::
 Resume: every image is written atomically (temp file + rename), so a view is finished exactly when
 all its files exist; a re-run with the same settings renders only unfinished views and, because
 every random draw is seeded by (seed, object, state, view), produces the same bytes as an
-uninterrupted run. A re-run with different settings is refused (``render.json`` differs).
+uninterrupted run. Protocols can share a folder (their states must agree); re-rendering a state
+with other cameras or settings is refused unless ``overwrite``.
 """
 from __future__ import annotations
 
@@ -119,23 +120,44 @@ def plan_object(obj_dir: Path, twin: Twin, meta: ObjectMeta, job: RenderJob) -> 
         views = [ViewRecord(f"{i:04d}", c, "train") for i, c in enumerate(train)]
         views += [ViewRecord(f"{sp.n_train + i:04d}", test[i], "test") for i in range(sp.n_test)]
         cameras[sp.state.id] = CamerasFile(K, job.options.depth_scale, views,
-                                           extra={"protocol": job.protocol, "state": sp.state.id})
+                                           extra={"protocol": job.protocol, "state": sp.state.id,
+                                                  "settings": settings_digest(job)})
     return ObjectPlan(obj_dir, meta, proto, cameras, bounds, radius)
 
 
+def settings_digest(job: RenderJob) -> str:
+    """Short SHA-256 of everything that determines a state's images (recorded in its cameras.json)."""
+    import hashlib
+
+    return hashlib.sha256(dumps_json(job.manifest()).encode()).hexdigest()[:16]
+
+
 def write_plan(plan: ObjectPlan, job: RenderJob, overwrite: bool = False) -> None:
-    """Write meta.json (with added states), render.json and every cameras.json; refuse mismatched settings."""
+    """Write meta.json (with added states), render.json and every cameras.json.
+
+    Several protocols may share an object folder (e.g. pd2gs for training and unseen for testing)
+    as long as every state they share was rendered with the same cameras and settings; any state
+    whose existing cameras.json differs is a conflict: refused, or with ``overwrite`` re-rendered.
+    """
     obj = plan.obj_dir
     manifest = json.loads(dumps_json(job.manifest()))  # as it reads back (tuples -> lists)
     mpath = obj / MANIFEST
-    if mpath.exists():
-        old = read_json(mpath)
-        if old != manifest:
-            if not overwrite:
-                diff = sorted(k for k in set(old) | set(manifest) if old.get(k) != manifest.get(k))
-                raise RsartError(f"{obj}: already rendered with other settings (differs in {', '.join(diff)}); "
-                                 f"use another --out or pass --overwrite")
-            shutil.rmtree(obj / "states", ignore_errors=True)
+    record = read_json(mpath) if mpath.exists() else {}
+    if record.get("format") != RENDER_FORMAT or not isinstance(record.get("protocols"), dict):
+        record = {"format": RENDER_FORMAT, "protocols": {}}
+    wanted = {sid: json.loads(dumps_json(cameras_to_dict(c))) for sid, c in plan.cameras.items()}
+    conflicts = [sid for sid in wanted if (obj / "states" / sid / "cameras.json").exists()
+                 and read_json(obj / "states" / sid / "cameras.json") != wanted[sid]]
+    if conflicts:
+        if not overwrite:
+            prev = record["protocols"].get(job.protocol)
+            why = (f"protocol {job.protocol} differs in "
+                   + ", ".join(sorted(k for k in set(prev) | set(manifest) if prev.get(k) != manifest.get(k)))
+                   if prev and prev != manifest else "other cameras or settings")
+            raise RsartError(f"{obj}: states {', '.join(conflicts)} were already rendered with other settings "
+                             f"({why}); use another --out or pass --overwrite")
+        for sid in conflicts:
+            shutil.rmtree(obj / "states" / sid)
     meta = plan.meta
     if plan.protocol.new_states:
         known = {s.id for s in meta.states}
@@ -146,10 +168,10 @@ def write_plan(plan: ObjectPlan, job: RenderJob, overwrite: bool = False) -> Non
         sdir.mkdir(parents=True, exist_ok=True)
         for tmp in [*sdir.glob(".*.tmp"), *sdir.glob("*/.*.tmp")]:  # leftovers of a killed run
             tmp.unlink(missing_ok=True)
-        cpath = sdir / "cameras.json"
-        if not cpath.exists() or read_json(cpath) != json.loads(dumps_json(cameras_to_dict(cams))):
-            write_cameras(cams, cpath)
-    write_json(mpath, manifest)
+        if not (sdir / "cameras.json").exists():
+            write_cameras(cams, sdir / "cameras.json")
+    record["protocols"][job.protocol] = manifest
+    write_json(mpath, record)
 
 
 def pending_tasks(plan: ObjectPlan, twin: Twin, job: RenderJob, chunk: int = 8) -> list[ViewTask]:

@@ -81,8 +81,22 @@ def test_rerun_skips_finished_views_and_refuses_other_settings(locker_dir, tmp_p
     stamp = rgb.stat().st_mtime_ns
     assert main(args) == 0 and rgb.stat().st_mtime_ns == stamp
     assert main([*args, "--seed", "7"]) == 2
-    assert "already rendered with other settings (differs in seed)" in capsys.readouterr().err
+    assert "states m0, m1, m2, m3 were already rendered with other settings (protocol pd2gs differs in seed)" \
+        in capsys.readouterr().err
+    assert main([*args, "--background", "plain"]) == 2  # same cameras, other images: also refused
     assert main([*args, "--seed", "7", "--overwrite"]) == 0 and verify(out).ok
+    assert rgb.stat().st_mtime_ns != stamp
+
+
+def test_protocols_share_a_folder_when_their_states_agree(locker_dir, tmp_path):
+    out = tmp_path / "out"
+    base = [str(locker_dir), "--out", str(out), "--test-views", "1", "--rgb-backend", "raycast", *SMALL]
+    assert main([*base, "--protocol", "pd2gs", "--views", "2"]) == 0
+    assert main([*base, "--protocol", "unseen"]) == 0  # training states + held-out states together
+    states = sorted(p.name for p in (out / "locker-0000" / "states").iterdir())
+    assert states == ["m0", "m1", "m2", "m3", "u1of2", "u1of6", "u5of6"]
+    assert validate_path(out) == [] and verify(out).ok
+    assert main([*base, "--protocol", "two-state", "--views", "2"]) == 2  # m0/m3 with other cameras
 
 
 def test_bad_input_exits_2_without_traceback(tmp_path, capsys):
