@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 
@@ -84,6 +85,11 @@ def _watertight(args):
     return WatertightConfig(resolution=args.resolution)
 
 
+def _positive(value: float | None, option: str) -> None:
+    if value is not None and not (math.isfinite(value) and value > 0):
+        raise RsartError(f"{option} must be a positive finite number, got {value}")
+
+
 def _log(args):
     return None if args.quiet else (lambda msg: print(msg, file=sys.stderr))
 
@@ -96,6 +102,7 @@ def _summary(meta, out: Path) -> str:
 def _partnet(args) -> int:
     from ..sources.partnet import convert_partnet, convert_partnet_root, split_ids
 
+    _positive(args.metric_scale, "--metric-scale")
     if args.root is None:
         if args.ids or args.split:
             raise RsartError("--ids/--split need --root PM_ROOT (and no PM_OBJECT_DIR)")
@@ -130,6 +137,7 @@ def _partnet(args) -> int:
 def _urdf(args) -> int:
     from ..sources.urdf_twin import convert_urdf
 
+    _positive(args.scale, "--scale")
     if args.scale is not None and args.units == "scene":
         raise RsartError("--scale converts to metres; do not combine it with --units scene")
     meta = convert_urdf(args.file, args.out, object_id=args.object_id, category=args.category, units=args.units,

@@ -143,6 +143,8 @@ def check_geometry(twin: Twin, source: str) -> None:
     for p in twin.parts:
         if not np.all(np.isfinite(p.mesh.vertices)):
             raise RsartError(f"{source}: part {p.name!r}: mesh has non-finite vertex coordinates")
+        if not p.mesh.area > 0:
+            raise RsartError(f"{source}: part {p.name!r}: mesh has no surface (zero area)")
 
 
 def scale_twin(twin: Twin, s: float) -> Twin:
@@ -318,7 +320,10 @@ def with_watertight_meshes(twin: Twin, cfg: WatertightConfig = WatertightConfig(
     parts = []
     for p in twin.parts:
         part_diag = float(np.linalg.norm(p.mesh.extents)) or obj_diag
-        wt, info = watertight_copy(p.mesh, cfg.pitch(obj_diag, part_diag), cfg)
+        try:
+            wt, info = watertight_copy(p.mesh, cfg.pitch(obj_diag, part_diag), cfg)
+        except RsartError as e:
+            raise RsartError(f"{twin.name}: part {p.name!r}: {e}") from None
         if log:
             log(f"  part {p.name}: {info}")
         vis = p.visuals or [p.mesh]

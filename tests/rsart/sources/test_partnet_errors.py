@@ -79,10 +79,12 @@ def test_broken_partnet_folder(case, partnet_root, tmp_path, capsys):
     ([], "give PM_OBJECT_DIR"),
     (["--root", "{root}"], "--root needs --ids"),
     (["--root", "{root}", "--ids", "../148"], "converted 0/1"),
+    (["{root}/148", "--metric-scale", "-1"], "--metric-scale must be a positive finite number"),
+    (["{root}/148", "--resolution", "4"], "--resolution must be within 16..2048"),
 ])
 def test_bad_usage(argv, fragment, partnet_root, tmp_path, capsys):
     argv = [a.replace("{root}", str(partnet_root)).replace("{tmp}", str(tmp_path)) for a in argv]
-    code = main(["convert", "partnet-mobility", *argv, "--out", str(tmp_path / "o"), *RES])
+    code = main(["convert", "partnet-mobility", *RES, *argv, "--out", str(tmp_path / "o")])
     cap = capsys.readouterr()
     assert code == 2
     assert fragment in cap.err + cap.out and "Traceback" not in cap.err

@@ -92,6 +92,8 @@ BAD = {
                                   [_joint("a", "prismatic", "body", "h"), _joint("b", "revolute", "h", "lid"),
                                    _joint("c", "revolute", "h", "c")]), "no geometry but 2 child joints"),
     "bad_number": (_good(xyz="1 two 3"), "not a valid URDF"),
+    "nan_vertex": (_urdf([LINK.format(n="body", m="nan.obj")], []), "part 'base': mesh has non-finite vertex"),
+    "zero_area_mesh": (_urdf([LINK.format(n="body", m="flat.obj")], []), "part 'base': mesh has no surface"),
 }
 
 
@@ -101,6 +103,8 @@ def test_malformed_urdf_is_refused_cleanly(case, urdf_dir, tmp_path, capsys):
     outside = tmp_path / "secret.obj"
     _box_obj(outside)
     (urdf_dir / "corrupt.obj").write_bytes(b"v 1 2\nf 1 2 3 4 5\n\x00\xff garbage")
+    (urdf_dir / "nan.obj").write_text("v nan 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    (urdf_dir / "flat.obj").write_text("v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n")
     os.symlink(outside, urdf_dir / "link.obj")
     path = urdf_dir / "robot.urdf"
     path.write_text(text.replace("{ext}", str(outside)))
@@ -227,3 +231,11 @@ def test_convert_usd_cli_roundtrip_and_bad_file(urdf_dir, tmp_path, capsys):
     assert main(["convert", "usd", str(bad), "--out", str(tmp_path / "c")]) == 2
     err = capsys.readouterr().err
     assert "bad.usda" in err and "Traceback" not in err and not (tmp_path / "c").exists()
+
+
+@pytest.mark.parametrize("opt,value", [("--scale", "0"), ("--scale", "-2"), ("--scale", "nan")])
+def test_bad_scale_option(opt, value, urdf_dir, tmp_path, capsys):
+    (urdf_dir / "robot.urdf").write_text(_good())
+    assert main(["convert", "urdf", str(urdf_dir / "robot.urdf"), "--out", str(tmp_path / "o"), opt, value]) == 2
+    err = capsys.readouterr().err
+    assert "--scale must be a positive finite number" in err and not (tmp_path / "o").exists()
