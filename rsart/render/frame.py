@@ -170,6 +170,8 @@ class StateRenderer:
             booth = hits.label == SCENE_LABEL
             bg, _ = self._shader.shade(hits, booth)
             bg[~booth] = opt.booth.curtain_colour
+        if not opt.antialias:  # coverage is 0 or 1: a selection, no blending arithmetic
+            return np.where(alpha[..., None] > 0.5, rgb, bg)
         out = rgb.astype(np.float32) + bg.astype(np.float32) * (1 - alpha[..., None])
         return np.clip(np.round(out), 0, 255).astype(np.uint8)
 

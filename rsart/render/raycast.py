@@ -131,9 +131,9 @@ class RaycastScene:
         labels = self.labels
         label = np.full(gid.shape, NO_HIT, dtype=np.int32)
         label[hit] = labels[gid[hit]]
-        normal = out["primitive_normals"].numpy().astype(np.float32)
+        normal = out["primitive_normals"].numpy()  # float32 buffers owned by us: no copies
         normal[~hit] = 0
-        bary = out["primitive_uvs"].numpy().astype(np.float32)
+        bary = out["primitive_uvs"].numpy()
         bary[~hit] = 0
         return RayHits(depth, label, gid, prim, bary, normal, d)
 
