@@ -135,11 +135,23 @@ def read_partnet_info(obj_dir: Path) -> PartnetInfo:
 
 # ----------------------------------------------------------------------------- twin
 def _link_transforms(urdf_path: Path) -> dict[str, np.ndarray]:
-    """Rest transforms (base frame) of every link of an already validated URDF (a tree)."""
+    """Rest transforms (base frame) of every link of a URDF that read_urdf accepted (a tree).
+
+    The bytes are checked again (no DTD/entities) before parsing: the file may have changed since.
+    """
+    import io
+
     import yourdfpy
 
-    robot = yourdfpy.URDF.load(str(urdf_path), load_meshes=False, build_scene_graph=False,
-                               build_collision_scene_graph=False, load_collision_meshes=False).robot
+    from ..urdf import _check_xml
+
+    data = urdf_path.read_bytes()
+    _check_xml(data, str(urdf_path))
+    try:
+        robot = yourdfpy.URDF.load(io.BytesIO(data), load_meshes=False, build_scene_graph=False,
+                                   build_collision_scene_graph=False, load_collision_meshes=False).robot
+    except Exception as e:
+        raise RsartError(f"{urdf_path}: not a valid URDF ({type(e).__name__}: {e})") from None
     children = {j.child for j in robot.joints}
     T = {l.name: np.eye(4) for l in robot.links if l.name not in children}
     pending = list(robot.joints)
