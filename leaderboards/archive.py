@@ -45,12 +45,12 @@ def _check_name(name: str) -> PurePosixPath:
 
 
 def _entry_kind(info: zipfile.ZipInfo) -> str:
-    mode = info.external_attr >> 16
-    if mode and stat.S_ISLNK(mode):
+    fmt = stat.S_IFMT(info.external_attr >> 16)  # 0 when the archiver recorded no file type (plain file)
+    if fmt == stat.S_IFLNK:
         return "symlink"
-    if info.is_dir():
+    if info.is_dir() or fmt == stat.S_IFDIR:
         return "dir"
-    if mode and not stat.S_ISREG(mode):
+    if fmt not in (0, stat.S_IFREG):
         return "special"
     return "file"
 
