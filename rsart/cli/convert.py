@@ -126,12 +126,13 @@ def _partnet(args) -> int:
         raise RsartError("--ids lists no id")
     rep = convert_partnet_root(args.root, args.out, ids, split=args.split, metric_scale=args.metric_scale,
                                overwrite=args.overwrite, watertight=_watertight(args), log=_log(args))
-    print(f"{args.out}: converted {len(rep.converted)}/{len(ids)}: {rep.converted}")
+    print(f"{args.out}: converted {len(rep.converted)}/{len(ids)}: {rep.converted}"
+          + (f"; kept existing: {rep.skipped}" if rep.skipped else ""))
     if rep.missing:
         print(f"missing from {args.root}: {rep.missing}", file=sys.stderr)
     for i, msg in rep.failed.items():
         print(f"failed {i}: {msg}", file=sys.stderr)
-    return 2 if rep.failed or not rep.converted else 0
+    return 2 if rep.failed or not (rep.converted or rep.skipped) else 0
 
 
 def _urdf(args) -> int:

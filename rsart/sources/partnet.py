@@ -322,6 +322,7 @@ class BatchReport:
     """Outcome of a batch conversion: converted object ids, ids missing from the root, failures (id -> message)."""
 
     converted: list[str] = field(default_factory=list)
+    skipped: list[str] = field(default_factory=list)
     missing: list[str] = field(default_factory=list)
     failed: dict[str, str] = field(default_factory=dict)
 
@@ -331,7 +332,9 @@ def convert_partnet_root(root: str | os.PathLike, out_root: str | os.PathLike, i
                          watertight: WatertightConfig = WatertightConfig(),
                          log: Callable[[str], None] | None = None) -> BatchReport:
     """Convert ``root/<id>`` for each id into ``out_root/pm-<id>``; missing ids and failures are reported,
-    not fatal. ``out_root/index.json`` lists the objects (merged with an existing index) and ``split``."""
+    not fatal. An existing ``pm-<id>`` object folder is kept (``skipped``) unless ``overwrite``, so an
+    interrupted batch can be re-run. ``out_root/index.json`` lists the objects (merged with an existing
+    index) and ``split``."""
     root, out_root = Path(root), Path(out_root)
     if not root.is_dir():
         raise RsartError(f"{root}: not a folder")
@@ -339,6 +342,11 @@ def convert_partnet_root(root: str | os.PathLike, out_root: str | os.PathLike, i
     for i in ids:
         if not _SAFE.match(i) or not (root / i).is_dir():
             rep.missing.append(i)
+            continue
+        if not overwrite and (out_root / f"pm-{i}" / "meta.json").is_file():
+            rep.skipped.append(f"pm-{i}")
+            if log:
+                log(f"{i}: {out_root / f'pm-{i}'} exists, kept (pass overwrite to redo it)")
             continue
         try:
             meta = convert_partnet(root / i, out_root / f"pm-{i}", metric_scale=metric_scale, overwrite=overwrite,
@@ -350,8 +358,8 @@ def convert_partnet_root(root: str | os.PathLike, out_root: str | os.PathLike, i
             rep.failed[i] = str(e)
             if log:
                 log(f"{i}: FAILED: {e}")
-    if rep.converted:
-        _update_index(out_root, rep.converted, split)
+    if rep.converted or rep.skipped:
+        _update_index(out_root, rep.converted + rep.skipped, split)
     return rep
 
 

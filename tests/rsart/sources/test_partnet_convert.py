@@ -232,6 +232,12 @@ def test_pd2gs_paper_split(partnet_root, tmp_path, capsys):
     assert "converted 1/12" in cap.out and "missing" in cap.err and "102373" in cap.err
     idx = json.loads((out / "index.json").read_text())
     assert idx["splits"] == {"pd2gs-paper": ["pm-100676"]}
+    # a re-run keeps the finished object (an interrupted batch resumes) and still succeeds
+    before = (out / "pm-100676" / "meta.json").stat().st_mtime_ns
+    assert main(["convert", "partnet-mobility", "--root", str(partnet_root), "--split", "pd2gs-paper",
+                 "--out", str(out), "--resolution", "32", "-q"]) == 0
+    assert "kept existing: ['pm-100676']" in capsys.readouterr().out
+    assert (out / "pm-100676" / "meta.json").stat().st_mtime_ns == before
 
 
 def test_world_frame_relates_to_the_paris_z_up_frame(partnet_root):
