@@ -202,6 +202,12 @@ def name_parts(twin: Twin, semantics: dict[str, tuple[str, str]]) -> Twin:
     return reindexed(twin.name, parts, joints)
 
 
+def _finite(v: Any, n: int) -> bool:
+    """True for a list of ``n`` finite numbers (JSON may hold 1e999 = inf, or anything else)."""
+    return (isinstance(v, list) and len(v) == n and all(
+        isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) and abs(x) < 1e9 for x in v))
+
+
 def mobility_check(joint, mob: dict[str, Any], R_root: np.ndarray) -> dict[str, Any]:
     """How ``mobility_v2.json``'s entry maps onto the URDF joint (world frame, see module docstring).
 
@@ -209,29 +215,31 @@ def mobility_check(joint, mob: dict[str, Any], R_root: np.ndarray) -> dict[str, 
     (turned into the world frame) and the URDF axis; URDF limits = sign·JSON limits + turns·2π (hinge).
     """
     jd = mob.get("jointData") or {}
-    ax = (jd.get("axis") or {}).get("direction")
-    lim = jd.get("limit") or {}
-    rec: dict[str, Any] = {"joint": mob.get("joint"), "direction": ax,
-                           "limit": [lim.get("a"), lim.get("b")], "noLimit": lim.get("noLimit")}
-    try:
-        d = R_root @ np.asarray(ax, dtype=float)
-        d = d / np.linalg.norm(d)
-    except Exception:
+    ax = (jd.get("axis") or {}).get("direction") if isinstance(jd.get("axis"), dict) else None
+    lim = jd.get("limit") if isinstance(jd.get("limit"), dict) else {}
+    a, b = lim.get("a"), lim.get("b")
+    rec: dict[str, Any] = {"joint": str(mob.get("joint"))[:40], "direction": ax if _finite(ax, 3) else None,
+                           "limit": [a, b] if _finite([a, b], 2) else None, "noLimit": lim.get("noLimit") is True}
+    if rec["direction"] is None or np.linalg.norm(ax) < 1e-12:
         rec["agrees"] = False
         return rec
+    d = R_root @ np.asarray(ax, dtype=float)
+    d = d / np.linalg.norm(d)
     cosang = float(np.dot(d, joint.axis))
     sign = 1 if cosang >= 0 else -1
     rec["sign"] = sign
     ok = abs(abs(cosang) - 1.0) < 1e-6
-    a, b = lim.get("a"), lim.get("b")
-    if joint.limits is not None and isinstance(a, (int, float)) and isinstance(b, (int, float)):
-        conv = math.radians if joint.type == "revolute" else float
-        lo, hi = sign * conv(a), sign * conv(b)
-        if joint.type == "revolute":
-            turns = round((joint.limits[0] - lo) / (2 * math.pi))
-            rec["turns"] = turns
-            lo, hi = lo + 2 * math.pi * turns, hi + 2 * math.pi * turns
-        ok = ok and abs(lo - joint.limits[0]) < 1e-6 and abs(hi - joint.limits[1]) < 1e-6
+    if joint.limits is not None:
+        if rec["limit"] is None:
+            ok = False
+        else:
+            conv = math.radians if joint.type == "revolute" else float
+            lo, hi = sign * conv(a), sign * conv(b)
+            if joint.type == "revolute":
+                turns = round((joint.limits[0] - lo) / (2 * math.pi))
+                rec["turns"] = turns
+                lo, hi = lo + 2 * math.pi * turns, hi + 2 * math.pi * turns
+            ok = ok and abs(lo - joint.limits[0]) < 1e-6 and abs(hi - joint.limits[1]) < 1e-6
     rec["agrees"] = bool(ok)
     return rec
 

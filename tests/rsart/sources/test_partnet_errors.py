@@ -89,3 +89,23 @@ def test_bad_usage(argv, fragment, partnet_root, tmp_path, capsys):
     assert code == 2
     assert fragment in cap.err + cap.out and "Traceback" not in cap.err
     assert not (tmp_path / "o" / "pm-148").exists()
+
+
+@pytest.mark.parametrize("entry", [
+    '{"id": 0, "parent": 1, "joint": "hinge", "jointData": {"axis": {"origin": [0, 0, 0], "direction": [0, 1e999, 0]},'
+    ' "limit": {"a": 1e999, "b": 0}}}',
+    '{"id": 0, "parent": 1, "joint": "hinge", "jointData": {"axis": "up", "limit": [1, 2]}}',
+    '{"id": 0, "parent": 1, "joint": "hinge", "jointData": {"axis": {"direction": [0, 0, 0]}, "limit": {}}}',
+])
+def test_odd_mobility_v2_entry_is_recorded_not_fatal(entry, partnet_root, tmp_path, capsys):
+    """mobility_v2.json is only cross-checked: a nonsensical entry is noted, the URDF is converted."""
+    d = tmp_path / "148"
+    shutil.copytree(partnet_root / "148", d)
+    (d / "mobility_v2.json").write_text(f'[{entry}, {{"id": 1, "parent": -1, "joint": "static"}}]')
+    out = tmp_path / "o"
+    assert main(["convert", "partnet-mobility", str(d), "--out", str(out), *RES]) == 0
+    from rsart.format import read_meta
+
+    meta = read_meta(out)
+    assert meta.joints[0].extra["mobility_v2"]["agrees"] is False
+    assert any("disagrees" in n for n in meta.extra["conversion_notes"])
