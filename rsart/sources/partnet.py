@@ -48,8 +48,8 @@ _SAFE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]{0,127}$")
 PARIS_ZUP_TO_WORLD = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
 WORLD_FRAME_NOTE = ("URDF base frame of mobility.urdf at rest (all joints 0), z up: PartNet-Mobility's root "
                     "fixed joint (rpy = pi/2, 0, -pi/2) turns the y-up annotation frame of mobility_v2.json "
-                    "into it, as SAPIEN loads the object; PARIS/DTArt 'rotated to z-up' ground truth = this frame turned "
-                    "+90 degrees about z (p_paris = Rz(+90) p_rsart)")
+                    "into it, as SAPIEN loads the object; PARIS/DTArt 'rotated to z-up' ground truth = this frame "
+                    "turned +90 degrees about z (p_paris = Rz(+90) p_rsart)")
 
 
 @dataclass

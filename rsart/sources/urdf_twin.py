@@ -125,8 +125,9 @@ def fold_helper_parts(twin: Twin, source: str | None = None) -> tuple[Twin, list
                              f"{hj.name!r} ({hj.type}); joint {cj.name!r} ({cj.type}) recorded as {kind}")
                 del parts[pi], joints[pi]
             else:
-                raise RsartError(f"{source or twin.name}: part {p.name!r} (links {p.extra.get('links', [])}) has no geometry but {len(kids)} child joints; "
-                                 "it cannot be folded into a one-joint-per-part twin")
+                raise RsartError(f"{source or twin.name}: part {p.name!r} (links {p.extra.get('links', [])}) has "
+                                 f"no geometry but {len(kids)} child joints; it cannot be folded into a "
+                                 "one-joint-per-part twin")
             changed = True
             break
     if not notes:
