@@ -69,6 +69,7 @@ class GrabCutProvider:
 
     iters: int = 5
     radius: int = 3
+    seed: int = 0
 
     def __call__(self, rgb: np.ndarray, pos_uv: np.ndarray, neg_uv: np.ndarray, *, support: np.ndarray,
                  **_) -> np.ndarray:
@@ -81,6 +82,7 @@ class GrabCutProvider:
             cv2.circle(mask, (int(u), int(v)), self.radius, int(cv2.GC_FGD), -1)
         bgd, fgd = np.zeros((1, 65)), np.zeros((1, 65))
         img = np.ascontiguousarray(rgb[..., ::-1], dtype=np.uint8)  # OpenCV wants BGR
+        cv2.setRNGSeed(self.seed)  # GrabCut's k-means draws from OpenCV's global RNG: seed it for repeatability
         try:
             cv2.grabCut(img, mask, None, bgd, fgd, self.iters, cv2.GC_INIT_WITH_MASK)
         except cv2.error:  # degenerate colour models (e.g. one-colour image): fall back to the seeds
@@ -133,10 +135,10 @@ class OracleProvider:
 
 
 def make_provider(name: str, *, grabcut_iters: int = 5, sam_checkpoint: str | None = None,
-                  sam_model_type: str = "vit_b") -> MaskProvider:
+                  sam_model_type: str = "vit_b", seed: int = 0) -> MaskProvider:
     """The mask provider called ``name`` ("grabcut" | "sam" | "oracle")."""
     if name == "grabcut":
-        return GrabCutProvider(iters=grabcut_iters)
+        return GrabCutProvider(iters=grabcut_iters, seed=seed)
     if name == "sam":
         return SamProvider(sam_checkpoint, sam_model_type)
     if name == "oracle":

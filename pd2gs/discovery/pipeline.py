@@ -108,7 +108,7 @@ def refine_parts(fld: StateField, labels: np.ndarray, obj, states: list[str], re
     k = fld.index(ref)
     L = int(labels.max()) + 1
     provider = make_provider(cfg.mask_provider, grabcut_iters=cfg.grabcut_iters, sam_checkpoint=cfg.sam_checkpoint,
-                             sam_model_type=cfg.sam_model_type)
+                             sam_model_type=cfg.sam_model_type, seed=cfg.seed)
     views = pick_views(obj, ref, cfg.refine_views, cfg.max_image_side)
     cams, part_masks, visible, depths = [], [], [], []
     for vid, cam, view in views:
