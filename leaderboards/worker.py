@@ -2,7 +2,7 @@
 
 A worker is a separate process (``python -m leaderboards.worker``, started by ``rsart leaderboard serve``).
 It validates the submission exactly as ``rsart-eval`` does (structure, files, then every mesh's content),
-scores it with one process, writes the rsart-eval outputs to ``<work>/jobs/<id>/eval`` and ingests them
+scores it with one process, writes ``scores.json`` and ``summary.md`` to ``<work>/jobs/<id>/eval`` and ingests them
 (idempotently, so a job re-run after a crash never duplicates an entry). It exits when its parent dies.
 """
 from __future__ import annotations
@@ -53,7 +53,8 @@ def score_job(job: dict, data_root: Path, work: Path, settings: ScoringSettings,
     """Validate, score and ingest one job → submission id (JobError for a bad submission)."""
     from rsart.evaluation.cli import check_mesh_content
     from rsart.evaluation.ground_truth import load_ground_truth, resolve_states
-    from rsart.evaluation.report import build_scores, write_reports
+    from rsart.evaluation.report import build_scores, summary_markdown
+    from rsart.io import atomic_write_text, write_json
     from rsart.evaluation.score import EvalConfig, score_submission
     from rsart.evaluation.submission import Limits, read_submission
     from rsart.io import sha256_file
@@ -81,7 +82,11 @@ def score_job(job: dict, data_root: Path, work: Path, settings: ScoringSettings,
         submission={"path": sub_file.name, "sha256": sha256_file(sub_file), "method": sub.method,
                     "dataset": sub.dataset})
     out = work / "jobs" / job["id"] / "eval"
-    write_reports(scores, out)
+    out.mkdir(parents=True, exist_ok=True)
+    # scores.json + summary.md only: rsart-eval's summary.png costs ~1.5 s of matplotlib per job and the
+    # site draws its own per-method plots
+    write_json(out / "scores.json", scores)
+    atomic_write_text(out / "summary.md", summary_markdown(scores))
     sid, _created = add_scores(engine, out, source="server", team=job["team"])
     return sid
 
