@@ -1,0 +1,168 @@
+"""``pd2gs``: train a PD²GS deformable Gaussian field on an RS-Art object and render its states.
+
+    pd2gs train OBJECT_DIR --out RUN [--states m0,m1,m2,m3] [--iters N] [--size 160x120]
+                [--backend cpu|reference|gsplat] [--seed S] [--depth-init] [--resume|--overwrite]
+    pd2gs render RUN --state m0 [--to m3] [--t 0.5] [--frames 9] [--views 4] [--out DIR]
+
+Exit status 2 for invalid input (message names the path or option), no tracebacks.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from dataclasses import asdict
+from pathlib import Path
+
+import pd2gs  # noqa: F401  (sets OMP_WAIT_POLICY before torch loads)
+
+
+class UsageError(Exception):
+    """Invalid command-line input."""
+
+
+def _parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="pd2gs", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    t = sub.add_parser("train", help="train a deformable Gaussian field on one object")
+    t.add_argument("object_dir", help="RS-Art object folder (meta.json + states/*/cameras.json)")
+    t.add_argument("--out", required=True, help="run folder (config.json, checkpoint.pt, metrics.json)")
+    t.add_argument("--states", default=None, help="comma-separated state ids (default: all captured)")
+    t.add_argument("--iters", type=int, default=None, help="training iterations (default 3000)")
+    t.add_argument("--size", default="160x120", help="training image size WxH in pixels")
+    t.add_argument("--backend", default="cpu", choices=["cpu", "reference", "gsplat"])
+    t.add_argument("--seed", type=int, default=0)
+    t.add_argument("--init-points", type=int, default=None, help="initial Gaussians (default 5000)")
+    t.add_argument("--max-gaussians", type=int, default=None, help="densification cap (default 20000)")
+    t.add_argument("--depth-init", action="store_true", help="initialise from back-projected depth")
+    t.add_argument("--resume", action="store_true", help="continue the run in --out")
+    t.add_argument("--overwrite", action="store_true", help="start over even if --out holds a run")
+    t.add_argument("--quiet", action="store_true", help="no progress bar")
+    r = sub.add_parser("render", help="render a trained run at a state or between two states")
+    r.add_argument("run", help="run folder written by pd2gs train")
+    r.add_argument("--state", required=True, help="state id (one of the run's training states)")
+    r.add_argument("--to", default=None, help="second state id for latent interpolation")
+    r.add_argument("--t", type=float, default=None, help="interpolation weight in [0, 1] (needs --to)")
+    r.add_argument("--frames", type=int, default=9, help="GIF frames when --to is given without --t")
+    r.add_argument("--views", type=int, default=4, help="cameras in the image strip")
+    r.add_argument("--backend", default="cpu", choices=["cpu", "reference", "gsplat"])
+    r.add_argument("--out", default=None, help="output folder (default RUN/renders)")
+    return ap
+
+
+def _train(args) -> int:
+    from pd2gs.data import DataError, load_frames, parse_size
+    from pd2gs.render.gsplat_backend import gsplat_status
+    from pd2gs.train import TrainConfig, Trainer, write_json_atomic
+
+    import torch
+
+    run = Path(args.out)
+    has_run = (run / "checkpoint.pt").is_file()
+    if has_run and not (args.resume or args.overwrite):
+        raise UsageError(f"{run}: already holds a run; pass --resume to continue or --overwrite")
+    if args.resume and not has_run:
+        raise UsageError(f"{run}: --resume given but there is no checkpoint.pt")
+    if args.backend == "gsplat" and gsplat_status():
+        raise UsageError(gsplat_status())
+    if args.resume:
+        cfg = TrainConfig.from_json(json.loads((run / "config.json").read_text()))
+        if args.iters is not None:
+            cfg.iters = args.iters
+    else:
+        cfg = TrainConfig(object_dir=str(Path(args.object_dir)), size=parse_size(args.size),
+                          backend=args.backend, seed=args.seed, depth_init=args.depth_init)
+        for name, val in (("iters", args.iters), ("init_points", args.init_points),
+                          ("max_gaussians", args.max_gaussians)):
+            if val is not None:
+                if val <= 0:
+                    raise UsageError(f"--{name.replace('_', '-')} must be positive, got {val}")
+                setattr(cfg, name, val)
+    states = args.states.split(",") if (args.states and not args.resume) else (cfg.states or None)
+    try:
+        cfg.states, frames = load_frames(cfg.object_dir, states, cfg.size, with_depth=cfg.depth_init)
+    except DataError as e:
+        raise UsageError(str(e)) from None
+    trainer = Trainer(cfg, frames, run)
+    if args.resume:
+        trainer.load_state_dict(torch.load(run / "checkpoint.pt", weights_only=False))
+    run.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(run / "config.json", asdict(cfg))
+    t0, it0 = time.perf_counter(), trainer.iteration
+    trainer.run(progress=not args.quiet)
+    secs = time.perf_counter() - t0
+    metrics = {"test_psnr": trainer.evaluate("test"), "train_psnr": trainer.evaluate("train"),
+               "iterations": trainer.iteration, "seconds": secs,
+               "it_per_s": (trainer.iteration - it0) / max(secs, 1e-9),
+               "gaussians": trainer.field.gaussians.num, "history": trainer.history}
+    write_json_atomic(run / "metrics.json", metrics)
+    print(f"trained {trainer.iteration} iterations in {secs:.0f} s; test PSNR {metrics['test_psnr']}")
+    return 0
+
+
+def _render(args) -> int:
+    import numpy as np
+    import torch
+
+    from pd2gs.data import Frame
+    from pd2gs.train import load_field, render_frame
+    from pd2gs.viz import write_gif, write_strip
+
+    run = Path(args.run)
+    if not (run / "checkpoint.pt").is_file() or not (run / "config.json").is_file():
+        raise UsageError(f"{run}: not a pd2gs run folder (needs config.json and checkpoint.pt)")
+    cfg, fld = load_field(run)
+    for sid in filter(None, [args.state, args.to]):
+        if sid not in cfg.states:
+            raise UsageError(f"unknown state {sid!r}; the run was trained on {', '.join(cfg.states)}")
+    if args.t is not None and (args.to is None or not 0.0 <= args.t <= 1.0):
+        raise UsageError("--t needs --to and must lie in [0, 1]")
+    cams = json.loads((run / "cameras.json").read_text())
+    mine = [c for c in cams if c["state"] == args.state]
+    picked = ([c for c in mine if c["split"] == "test"] or mine)[:max(1, args.views)]
+    frames = [Frame(torch.zeros(c["size"][1], c["size"][0], 3), None, torch.tensor(c["K"]),
+                    torch.tensor(c["w2c"]), 0, "render") for c in picked]
+    k0 = cfg.states.index(args.state)
+    k1 = cfg.states.index(args.to) if args.to else k0
+    out_dir = Path(args.out) if args.out else run / "renders"
+    out_dir.mkdir(parents=True, exist_ok=True)
+
+    @torch.no_grad()
+    def image(latent, frame):
+        o = render_frame(fld, latent, frame, cfg.background, args.backend)
+        return (o.rgb.clamp(0, 1).numpy() * 255 + 0.5).astype(np.uint8)
+
+    if args.to is None or args.t is not None:
+        t = args.t or 0.0
+        latent = fld.interpolate(k0, k1, t)
+        name = args.state if args.to is None else f"{args.state}_to_{args.to}_t{t:.2f}"
+        path = write_strip([image(latent, f) for f in frames], out_dir / f"{name}.png")
+        print(f"wrote {path}")
+    else:
+        ts = np.linspace(0, 1, max(2, args.frames))
+        imgs = [image(fld.interpolate(k0, k1, float(t)), frames[0]) for t in ts]
+        gif = write_gif(imgs + imgs[::-1], out_dir / f"{args.state}_to_{args.to}.gif")
+        strip = write_strip(imgs, out_dir / f"{args.state}_to_{args.to}.png")
+        print(f"wrote {gif} and {strip}")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the ``pd2gs`` console script."""
+    from pd2gs.data import DataError
+
+    args = _parser().parse_args(argv)
+    try:
+        return _train(args) if args.cmd == "train" else _render(args)
+    except (UsageError, DataError) as e:
+        print(f"pd2gs: error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("pd2gs: interrupted (the last checkpoint is kept; resume with --resume)", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,121 @@
+"""Latent-conditioned deformation of the canonical field (PD²GS Sec. 3.2).
+
+f_def(mu_i, q_i, s_i | alpha_k) -> (d_mu, d_q, d_s); d_q is normalised and composed on the left,
+q^(k) = d_q ⊗ q; mu^(k) = mu + d_mu; the scale offset is added to the stored log-scale,
+log s^(k) = log s + d_s (so scales stay positive). Colours and opacities are shared by all states.
+
+The last layer is zero-initialised and d_q is predicted as (1, 0, 0, 0) + output, so an untrained
+field is exactly the identity deformation.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+from torch import nn
+
+from pd2gs.gaussians import CanonicalGaussians
+
+
+@dataclass
+class DeformConfig:
+    """Network size (chosen for a 2-core CPU; see docs/pd2gs.md)."""
+
+    latent_dim: int = 32
+    hidden: int = 64
+    layers: int = 3
+    pe_freqs: int = 6
+
+
+def positional_encoding(x: torch.Tensor, freqs: int) -> torch.Tensor:
+    """(N, 3) -> (N, 3 + 6 * freqs): x, sin(2^j pi x), cos(2^j pi x)."""
+    scales = (2.0 ** torch.arange(freqs, dtype=x.dtype)) * torch.pi
+    xs = x[:, :, None] * scales
+    return torch.cat([x, torch.sin(xs).flatten(1), torch.cos(xs).flatten(1)], dim=1)
+
+
+def quat_multiply(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """Hamilton product a ⊗ b of (N, 4) (w, x, y, z) quaternions."""
+    aw, ax, ay, az = a.unbind(-1)
+    bw, bx, by, bz = b.unbind(-1)
+    return torch.stack([
+        aw * bw - ax * bx - ay * by - az * bz,
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
+    ], dim=-1)
+
+
+class DeformMLP(nn.Module):
+    """MLP on [PE(mu / extent), q, log s, alpha] -> 10 outputs (d_mu 3, d_q 4, d_s 3)."""
+
+    def __init__(self, cfg: DeformConfig):
+        super().__init__()
+        self.cfg = cfg
+        d_in = 3 + 6 * cfg.pe_freqs + 4 + 3 + cfg.latent_dim
+        layers: list[nn.Module] = []
+        for i in range(cfg.layers):
+            layers += [nn.Linear(d_in if i == 0 else cfg.hidden, cfg.hidden), nn.ReLU()]
+        self.body = nn.Sequential(*layers)
+        self.head = nn.Linear(cfg.hidden, 10)
+        nn.init.zeros_(self.head.weight)
+        nn.init.zeros_(self.head.bias)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.head(self.body(x))
+
+
+@dataclass
+class DeformedGaussians:
+    """Geometry of one state: means (N, 3), quats (N, 4) unit, log_scales (N, 3)."""
+
+    means: torch.Tensor
+    quats: torch.Tensor
+    log_scales: torch.Tensor
+
+
+class DeformableField(nn.Module):
+    """Canonical Gaussians + deformation MLP + K state latents (K, D)."""
+
+    def __init__(self, gaussians: CanonicalGaussians, num_states: int, cfg: DeformConfig,
+                 center, extent: float):
+        super().__init__()
+        self.gaussians = gaussians
+        self.mlp = DeformMLP(cfg)
+        self.latents = nn.Parameter(0.01 * torch.randn(num_states, cfg.latent_dim))
+        self.register_buffer("center", torch.as_tensor(center, dtype=torch.float32).clone())
+        self.extent = float(extent)
+
+    def latent(self, k: int) -> torch.Tensor:
+        """(D,) latent of training state index k."""
+        return self.latents[k]
+
+    def interpolate(self, k0: int, k1: int, t: float) -> torch.Tensor:
+        """(D,) latent (1 - t) alpha_k0 + t alpha_k1 (t = 0 gives state k0)."""
+        return (1 - t) * self.latents[k0] + t * self.latents[k1]
+
+    def offsets(self, latent: torch.Tensor) -> torch.Tensor:
+        """(N, 10) raw network outputs for every canonical Gaussian."""
+        g = self.gaussians
+        q = g.quats / g.quats.norm(dim=-1, keepdim=True)
+        x = torch.cat([positional_encoding((g.means - self.center) / self.extent, self.mlp.cfg.pe_freqs),
+                       q, g.log_scales, latent.expand(g.num, -1)], dim=1)
+        return self.mlp(x)
+
+    def deform(self, latent: torch.Tensor, mask: torch.Tensor | None = None,
+               base_latent: torch.Tensor | None = None) -> DeformedGaussians:
+        """Geometry in the state given by ``latent`` (D,).
+
+        Part-level control: with ``mask`` (N,) bool, only the masked Gaussians follow ``latent``;
+        the others follow ``base_latent`` (or stay canonical if it is None).
+        """
+        out = self.offsets(latent)
+        if mask is not None:
+            base = self.offsets(base_latent) if base_latent is not None else torch.zeros_like(out)
+            out = torch.where(mask[:, None], out, base)
+        g = self.gaussians
+        dq = out[:, 3:7] + torch.tensor([1.0, 0.0, 0.0, 0.0])
+        dq = dq / dq.norm(dim=-1, keepdim=True)
+        q = g.quats / g.quats.norm(dim=-1, keepdim=True)
+        return DeformedGaussians(g.means + self.extent * out[:, 0:3], quat_multiply(dq, q),
+                                 g.log_scales + out[:, 7:10])

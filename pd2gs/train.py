@@ -1,0 +1,281 @@
+"""PD²GS training: jointly optimise canonical Gaussians, the deformation MLP and K state latents.
+
+One iteration = pick a training view (state k), deform the canonical field with alpha_k,
+rasterize, loss (1 - 0.2) L1 + 0.2 (1 - SSIM), backward, Adam step, density control.
+Deterministic given ``seed`` (fixed thread count, deterministic kernels, seeded sampling).
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import random
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from pd2gs.data import Frame, backproject_frames, camera_bounds
+from pd2gs.deform import DeformableField, DeformConfig
+from pd2gs.densify import DensifyStats, densify_and_prune, reset_opacity
+from pd2gs.gaussians import init_from_bounds, init_from_points
+from pd2gs.losses import photometric_loss, psnr
+from pd2gs.render import rasterize
+
+
+@dataclass
+class TrainConfig:
+    """Everything that defines a run (saved as RUN/config.json)."""
+
+    object_dir: str = ""
+    states: list[str] = field(default_factory=list)
+    size: tuple[int, int] = (160, 120)
+    iters: int = 3000
+    backend: str = "cpu"
+    seed: int = 0
+    init_points: int = 5000
+    depth_init: bool = False
+    background: tuple[float, float, float] | None = None  # None: estimated from image borders
+    deform: DeformConfig = field(default_factory=DeformConfig)
+    lambda_dssim: float = 0.2
+    lr_means: float = 1.6e-3  # x scene extent, decays x0.01 over the run
+    lr_log_scales: float = 5e-3
+    lr_quats: float = 1e-3
+    lr_colors: float = 1e-2
+    lr_opacity: float = 5e-2
+    lr_mlp: float = 1e-3  # decays x0.1 over the run
+    lr_latents: float = 1e-3
+    densify_from: int = 300
+    densify_until_frac: float = 0.6
+    densify_every: int = 100
+    densify_grad: float = 2e-4
+    percent_dense: float = 0.01
+    min_opacity: float = 0.005
+    max_gaussians: int = 20000
+    opacity_reset_every: int = 1000
+    checkpoint_every: int = 500
+    threads: int = 2
+
+    @staticmethod
+    def from_json(d: dict) -> "TrainConfig":
+        d = dict(d)
+        d["deform"] = DeformConfig(**d.get("deform", {}))
+        d["size"] = tuple(d["size"])
+        if d.get("background") is not None:
+            d["background"] = tuple(d["background"])
+        names = {f.name for f in dataclasses.fields(TrainConfig)}
+        return TrainConfig(**{k: v for k, v in d.items() if k in names})
+
+
+def estimate_background(frames: list[Frame]) -> tuple[float, float, float]:
+    """Median colour of the 1-pixel image borders of the training views."""
+    px = torch.cat([torch.cat([f.rgb[0], f.rgb[-1], f.rgb[:, 0], f.rgb[:, -1]]) for f in frames])
+    return tuple(float(v) for v in px.median(dim=0).values)
+
+
+def build_field(cfg: TrainConfig, frames: list[Frame]) -> DeformableField:
+    """Canonical Gaussians from depth back-projection (cfg.depth_init) or the camera-derived
+    bounding box; deformation MLP at identity; K = len(cfg.states) latents."""
+    points = None
+    if cfg.depth_init:
+        points, colors = backproject_frames([f for f in frames if f.split == "train"])
+    lo, hi = camera_bounds(frames, points)
+    if points is not None:
+        g = init_from_points(points, colors, cfg.init_points, cfg.seed)
+    else:
+        g = init_from_bounds(lo, hi, cfg.init_points, cfg.seed)
+    torch.manual_seed(cfg.seed)
+    return DeformableField(g, len(cfg.states), cfg.deform, (lo + hi) / 2, float((hi - lo).norm() / 2))
+
+
+def make_optimizer(cfg: TrainConfig, fld: DeformableField) -> torch.optim.Adam:
+    g = fld.gaussians
+    groups = [
+        {"params": [g.means], "lr": cfg.lr_means * fld.extent, "name": "means"},
+        {"params": [g.log_scales], "lr": cfg.lr_log_scales, "name": "log_scales"},
+        {"params": [g.quats], "lr": cfg.lr_quats, "name": "quats"},
+        {"params": [g.color_logits], "lr": cfg.lr_colors, "name": "color_logits"},
+        {"params": [g.opacity_logits], "lr": cfg.lr_opacity, "name": "opacity_logits"},
+        {"params": list(fld.mlp.parameters()), "lr": cfg.lr_mlp, "name": "mlp"},
+        {"params": [fld.latents], "lr": cfg.lr_latents, "name": "latents"},
+    ]
+    return torch.optim.Adam(groups, eps=1e-15)
+
+
+def render_frame(fld: DeformableField, latent: torch.Tensor, frame: Frame, background, backend: str, **kw):
+    """Render the field deformed by ``latent`` (D,) into ``frame``'s camera (RenderOutput)."""
+    d = fld.deform(latent, kw.pop("mask", None), kw.pop("base_latent", None))
+    g = fld.gaussians
+    w, h = frame.size
+    return rasterize(d.means, d.quats, d.log_scales.exp(), g.colors, g.opacities, frame.K, frame.w2c,
+                     w, h, background=torch.tensor(background), backend=backend, **kw)
+
+
+class Trainer:
+    """Owns the field, optimiser, sampler and schedule; ``run()`` trains to ``cfg.iters``."""
+
+    def __init__(self, cfg: TrainConfig, frames: list[Frame], run_dir: Path | None = None):
+        self.cfg = cfg
+        self.frames = frames
+        self.train = [f for f in frames if f.split == "train"]
+        if not self.train:
+            raise ValueError("no training views (split == 'train')")
+        self.run_dir = Path(run_dir) if run_dir is not None else None
+        torch.set_num_threads(cfg.threads)
+        if cfg.background is None:
+            cfg.background = estimate_background(self.train)
+        self.field = build_field(cfg, frames)
+        self.opt = make_optimizer(cfg, self.field)
+        self.stats = DensifyStats.zeros(self.field.gaussians.num)
+        self.iteration = 0
+        self.rng = np.random.default_rng(cfg.seed)
+        self.gen = torch.Generator().manual_seed(cfg.seed + 1)
+        self.order: list[int] = []
+        self.history: list[dict] = []
+
+    # ---- schedule -------------------------------------------------------------------------
+    def _set_lrs(self) -> None:
+        frac = self.iteration / max(1, self.cfg.iters)
+        for group in self.opt.param_groups:
+            if group["name"] == "means":
+                group["lr"] = self.cfg.lr_means * self.field.extent * 0.01 ** frac
+            elif group["name"] == "mlp":
+                group["lr"] = self.cfg.lr_mlp * 0.1 ** frac
+
+    def _next_frame(self) -> Frame:
+        if not self.order:
+            self.order = list(self.rng.permutation(len(self.train)))
+        return self.train[self.order.pop()]
+
+    def step(self) -> dict:
+        """One training iteration; returns {loss, psnr}."""
+        cfg = self.cfg
+        self._set_lrs()
+        frame = self._next_frame()
+        out = render_frame(self.field, self.field.latent(frame.state), frame, cfg.background, cfg.backend)
+        out.means2d.retain_grad()
+        loss = photometric_loss(out.rgb, frame.rgb, cfg.lambda_dssim)
+        self.opt.zero_grad(set_to_none=True)
+        loss.backward()
+        self.iteration += 1
+        it = self.iteration
+        until = int(cfg.densify_until_frac * cfg.iters)
+        if it < until and out.means2d.grad is not None:
+            self.stats.add(out.means2d.grad, out.radii, *frame.size)
+        self.opt.step()
+        with torch.no_grad():
+            q = self.field.gaussians.quats
+            q /= q.norm(dim=-1, keepdim=True)
+        info = {"loss": float(loss.detach()), "psnr": psnr(out.rgb, frame.rgb)}
+        if it >= cfg.densify_from and it < until and it % cfg.densify_every == 0:
+            info["densify"] = densify_and_prune(
+                self.field.gaussians, self.opt, self.stats, cfg.densify_grad, self.field.extent,
+                cfg.percent_dense, cfg.min_opacity, cfg.max_gaussians, self.gen)
+            self.stats = DensifyStats.zeros(self.field.gaussians.num)
+        if cfg.opacity_reset_every and it < until and it % cfg.opacity_reset_every == 0:
+            reset_opacity(self.field.gaussians, self.opt)
+        return info
+
+    def run(self, progress: bool = True, stop_at: int | None = None) -> None:
+        """Train until cfg.iters (or ``stop_at``), checkpointing every cfg.checkpoint_every
+        iterations and at the end."""
+        from tqdm import tqdm
+
+        end = min(self.cfg.iters, stop_at or self.cfg.iters)
+        bar = tqdm(total=self.cfg.iters, initial=self.iteration, disable=not progress, dynamic_ncols=True)
+        ema = None
+        while self.iteration < end:
+            info = self.step()
+            ema = info["psnr"] if ema is None else 0.9 * ema + 0.1 * info["psnr"]
+            bar.update(1)
+            bar.set_postfix(loss=f"{info['loss']:.4f}", psnr=f"{ema:.2f}", n=self.field.gaussians.num)
+            if self.iteration % 50 == 0:
+                self.history.append({"iter": self.iteration, "loss": info["loss"], "psnr": info["psnr"],
+                                     "gaussians": self.field.gaussians.num})
+            if self.run_dir is not None and self.iteration % self.cfg.checkpoint_every == 0:
+                self.save()
+        bar.close()
+        if self.run_dir is not None:
+            self.save()
+
+    # ---- evaluation ---------------------------------------------------------------------------
+    @torch.no_grad()
+    def evaluate(self, split: str = "test") -> dict:
+        """Mean PSNR per training state on ``split`` views ({state id: dB}, plus 'mean')."""
+        res: dict[str, list[float]] = {}
+        for f in self.frames:
+            if f.split != split:
+                continue
+            out = render_frame(self.field, self.field.latent(f.state), f, self.cfg.background, self.cfg.backend)
+            res.setdefault(self.cfg.states[f.state], []).append(psnr(out.rgb.clamp(0, 1), f.rgb))
+        table = {k: float(np.mean(v)) for k, v in res.items()}
+        if table:
+            table["mean"] = float(np.mean(list(table.values())))
+        return table
+
+    # ---- checkpoints ---------------------------------------------------------------------------
+    def state_dict(self) -> dict:
+        return {"iteration": self.iteration, "field": self.field.state_dict(), "extent": self.field.extent,
+                "opt": self.opt.state_dict(), "stats": (self.stats.grad_sum, self.stats.count),
+                "rng": self.rng.bit_generator.state, "gen": self.gen.get_state(),
+                "torch_rng": torch.get_rng_state(), "py_rng": random.getstate(),
+                "order": list(map(int, self.order)), "history": self.history}
+
+    def load_state_dict(self, st: dict) -> None:
+        self.field.gaussians.resize_like({k.split(".", 1)[1]: v for k, v in st["field"].items()
+                                          if k.startswith("gaussians.")})
+        self.field.load_state_dict(st["field"])
+        self.opt = make_optimizer(self.cfg, self.field)
+        self.opt.load_state_dict(st["opt"])
+        self.stats = DensifyStats(*st["stats"])
+        self.iteration = st["iteration"]
+        self.rng.bit_generator.state = st["rng"]
+        self.gen.set_state(st["gen"])
+        torch.set_rng_state(st["torch_rng"])
+        random.setstate(st["py_rng"])
+        self.order = list(st["order"])
+        self.history = st["history"]
+
+    def save(self) -> Path:
+        """Atomically write RUN/checkpoint.pt (and config.json, cameras.json)."""
+        assert self.run_dir is not None
+        self.run_dir.mkdir(parents=True, exist_ok=True)
+        path = self.run_dir / "checkpoint.pt"
+        tmp = path.with_suffix(".pt.tmp")
+        torch.save(self.state_dict(), tmp)
+        tmp.replace(path)
+        write_json_atomic(self.run_dir / "config.json", asdict(self.cfg))
+        cams = [{"state": self.cfg.states[f.state], "split": f.split, "view": f.view_id,
+                 "K": f.K.tolist(), "w2c": f.w2c.tolist(), "size": list(f.size)} for f in self.frames]
+        write_json_atomic(self.run_dir / "cameras.json", cams)
+        return path
+
+
+def write_json_atomic(path: Path, obj) -> None:
+    """JSON via temp file + rename (NaN/inf written as null)."""
+    def clean(x):
+        if isinstance(x, float) and not math.isfinite(x):
+            return None
+        if isinstance(x, dict):
+            return {k: clean(v) for k, v in x.items()}
+        if isinstance(x, (list, tuple)):
+            return [clean(v) for v in x]
+        return x
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    tmp.write_text(json.dumps(clean(obj), indent=2))
+    tmp.replace(path)
+
+
+def load_field(run_dir: str | Path) -> tuple[TrainConfig, DeformableField]:
+    """Config and trained field of a run folder (config.json + checkpoint.pt)."""
+    from pd2gs.gaussians import CanonicalGaussians
+
+    run = Path(run_dir)
+    cfg = TrainConfig.from_json(json.loads((run / "config.json").read_text()))
+    st = torch.load(run / "checkpoint.pt", map_location="cpu", weights_only=False)
+    g = CanonicalGaussians(torch.zeros(1, 3), torch.zeros(1, 3), torch.full((1, 3), 0.5))
+    fld = DeformableField(g, len(cfg.states), cfg.deform, torch.zeros(3), float(st["extent"]))
+    g.resize_like({k.split(".", 1)[1]: v for k, v in st["field"].items() if k.startswith("gaussians.")})
+    fld.load_state_dict(st["field"])
+    return cfg, fld
