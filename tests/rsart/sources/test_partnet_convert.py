@@ -281,3 +281,20 @@ def test_ray_cast_masks_cover_the_right_parts(converted):
                 seen.add(int(i))
         if sid == "m3":  # everything open: every part is in view (closed, the door hides the drawers)
             assert seen == set(range(len(twin.parts))), (sid, seen)
+
+
+# 100162's lids are single flat quads; twin/object.urdf uses the visual OBJ as collision geometry too, and
+# MuJoCo cannot build a convex hull of coplanar vertices (a rsart.urdf writer matter, reported to the lead).
+MUJOCO_KNOWN = {"100162": "flat visual mesh used as collision geometry: MuJoCo cannot hull coplanar vertices"}
+
+
+@pytest.mark.parametrize("i", [pytest.param(i, marks=pytest.mark.xfail(reason=MUJOCO_KNOWN[i], strict=False))
+                               if i in MUJOCO_KNOWN else i for i in IDS])
+def test_written_urdf_poses_like_the_twin_in_mujoco(i, converted):
+    """The object.urdf written for a converted object loads in MuJoCo and poses every part as rsart does."""
+    from rsart.mujoco_check import mujoco_pose_error
+
+    obj = rsart.load(converted / f"pm-{i}")
+    urdf = converted / f"pm-{i}" / "twin" / "object.urdf"
+    err = max(mujoco_pose_error(obj.twin, urdf, s.values) for s in obj.meta.states)
+    assert err < 1e-9, (i, err)
