@@ -14,6 +14,7 @@ ray-cast hits (face normals + texture/vertex/face colours through barycentrics).
 """
 from __future__ import annotations
 
+import atexit
 import os
 import subprocess
 import sys
@@ -222,9 +223,21 @@ def shared_renderer(width: int, height: int, platform: str, lighting: Lighting =
     key = (width, height, antialias)
     r = _SHARED.get(key)
     if r is None:
+        if not _SHARED:
+            atexit.register(_close_shared)
         r = _SHARED[key] = PyrenderRgb(width, height, platform, lighting, antialias)
     r.lighting = lighting
     return r
+
+
+def _close_shared() -> None:
+    """Delete the shared renderers before interpreter shutdown (pyrender's finalisers fail noisily after)."""
+    while _SHARED:
+        _, r = _SHARED.popitem()
+        try:
+            r.close()
+        except Exception:  # the GL display may already be gone; nothing left to release
+            pass
 
 
 # ----------------------------------------------------------------------------- ray-cast shading
@@ -288,27 +301,47 @@ class RaycastShader:
     def set_scene(self, meshes: list[trimesh.Trimesh]) -> None:
         """``meshes`` in the same order as the geometries of the :class:`RaycastScene` whose hits are shaded."""
         self._albedo = [Albedo.of(m) for m in meshes]
-        # face-coloured geometries share one uint8 sRGB table indexed by offset[geometry] + triangle
+        # face-coloured geometries: every face gets an index into a palette of distinct colours, found
+        # at offset[geometry] + triangle; shaded colours come from a (palette, 256 cos levels) table
         self._flat = np.array([a.face_colour is not None for a in self._albedo] + [False], dtype=bool)
         tables = [np.round(a.face_colour * 255).astype(np.uint8) if a.face_colour is not None
                   else np.zeros((0, 3), np.uint8) for a in self._albedo]
         self._offset = np.concatenate([[0], np.cumsum([len(t) for t in tables])]).astype(np.int64)
-        self._table = np.concatenate(tables + [np.zeros((1, 3), np.uint8)], axis=0)
+        allc = np.concatenate(tables + [np.zeros((1, 3), np.uint8)], axis=0)
+        self._palette, self._colour_id = np.unique(allc, axis=0, return_inverse=True)
+        self._colour_id = self._colour_id.reshape(-1).astype(np.int32)
+        levels = np.arange(256, dtype=np.float32) / 255.0
+        self._shaded = self._shade_linear(self._palette[:, None, :], levels[None, :]).reshape(-1, 3)
+
+    def _shade_linear(self, srgb: np.ndarray, cos: np.ndarray) -> np.ndarray:
+        """uint8 sRGB of uint8 sRGB base colours lit at incidence cosines ``cos`` (broadcast (..., 3) / (...))."""
+        # in linear light like pyrender (diffuse BRDF albedo/pi times the light intensity), sRGB output
+        lam = (self.lighting.ambient + self.lighting.headlight / np.pi * cos).astype(np.float32)
+        lin = _SRGB_TO_LINEAR[srgb] * lam[..., None]
+        return _LINEAR_TO_SRGB[np.minimum((lin * (_LUT_N - 1) + 0.5).astype(np.int32), _LUT_N - 1)]
 
     def shade(self, hits: RayHits, select: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """(H, W, 3) uint8 RGB premultiplied over black and (H, W) float32 coverage (0 or 1).
 
         ``select`` (H, W) bool limits shading to those pixels (others count as not hit).
-        Works on the hit pixels only, with sRGB look-up tables (this runs for every frame).
+        Works on the hit pixels only, with look-up tables (this runs for every frame); face-coloured
+        surfaces use incidence cosines quantised to 1/255 (at most one sRGB code value of difference).
         """
         H, W = hits.depth.shape
         hit = hits.hit if select is None else hits.hit & select
         idx = np.flatnonzero(hit)
         g = hits.geometry.reshape(-1)[idx]
         p = hits.primitive.reshape(-1)[idx]
+        cos = hits.cos_incidence().reshape(-1)[idx]
         flat = self._flat[g]
-        base = self._table[np.where(flat, self._offset[g] + p, len(self._table) - 1)]
-        if not flat.all():
+        out = np.zeros((H * W, 3), dtype=np.uint8)
+        if flat.all():
+            cid = self._colour_id[self._offset[g] + p]
+            out[idx] = self._shaded[cid * 256 + (cos * 255 + 0.5).astype(np.int32)]
+        else:
+            base = np.empty((len(idx), 3), dtype=np.uint8)
+            fl = np.flatnonzero(flat)
+            base[fl] = self._palette[self._colour_id[self._offset[g[fl]] + p[fl]]]
             rest = np.flatnonzero(~flat)
             b = hits.bary.reshape(-1, 2)[idx[rest]]
             gr, pr = g[rest], p[rest]
@@ -316,14 +349,7 @@ class RaycastShader:
                 sel = gr == gi
                 col = self._albedo[gi].sample(pr[sel], b[sel])
                 base[rest[sel]] = np.clip(np.round(col * 255), 0, 255).astype(np.uint8)
-        d = hits.ray_dir.reshape(-1, 3)[idx]
-        n = hits.normal.reshape(-1, 3)[idx]
-        cos = np.abs(np.einsum("ij,ij->i", d, n)) / np.sqrt(np.einsum("ij,ij->i", d, d))
-        # shaded in linear light like pyrender (diffuse BRDF albedo/pi times the light intensity), sRGB output
-        lam = (self.lighting.ambient + self.lighting.headlight / np.pi * cos).astype(np.float32)
-        lin = _SRGB_TO_LINEAR[base] * lam[:, None]
-        out = np.zeros((H * W, 3), dtype=np.uint8)
-        out[idx] = _LINEAR_TO_SRGB[np.minimum((lin * (_LUT_N - 1) + 0.5).astype(np.int32), _LUT_N - 1)]
+            out[idx] = self._shade_linear(base, cos)
         return out.reshape(H, W, 3), hit.astype(np.float32)
 
 

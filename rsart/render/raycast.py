@@ -28,8 +28,8 @@ class RayHits:
     """Per-pixel first hits of one view; all arrays are (H, W[, k]).
 
     ``depth``: float32 z-depth (0 where nothing was hit); ``label``: int32 (see module doc);
-    ``geometry``: int64 index of the geometry added to the scene (-1 = none);
-    ``primitive``: int64 triangle index within that geometry (-1 = none);
+    ``geometry``: int32 index of the geometry added to the scene (-1 = none);
+    ``primitive``: int32 triangle index within that geometry (-1 = none);
     ``bary``: float32 (H, W, 2) open3d barycentrics (u, v): hit = (1-u-v)·v0 + u·v1 + v·v2;
     ``normal``: float32 (H, W, 3) unit world-frame geometric normal of the hit triangle (as wound);
     ``ray_dir``: float32 (H, W, 3) world-frame ray directions (camera z = 1).
@@ -42,6 +42,8 @@ class RayHits:
     bary: np.ndarray
     normal: np.ndarray
     ray_dir: np.ndarray
+    _key: tuple = ()
+    _cos: np.ndarray | None = None
 
     @property
     def hit(self) -> np.ndarray:
@@ -58,13 +60,32 @@ class RayHits:
         return np.where(self.label >= 0, self.depth, 0).astype(np.float32)
 
     def cos_incidence(self) -> np.ndarray:
-        """(H, W) float32 |cos| of the angle between the ray and the surface normal (0 where no hit)."""
-        d = self.ray_dir / np.linalg.norm(self.ray_dir, axis=-1, keepdims=True)
-        c = np.abs(np.sum(d * self.normal, axis=-1))
-        return np.where(self.hit, c, 0).astype(np.float32)
+        """(H, W) float32 |cos| of the angle between the ray and the surface normal (0 where no hit;
+        normals of missed rays are 0). Computed once per view."""
+        if self._cos is None:
+            dot = np.einsum("hwc,hwc->hw", self.ray_dir, self.normal)
+            self._cos = np.abs(dot) * inverse_ray_norm(self.ray_dir.shape[1], self.ray_dir.shape[0], self._key)
+        return self._cos
 
 
 _DIR_CACHE: dict[tuple, np.ndarray] = {}
+_INV_NORM: dict[tuple, np.ndarray] = {}
+
+
+def inverse_ray_norm(width: int, height: int, key: tuple) -> np.ndarray:
+    """(H, W) float32 1 / |d| of the pixel rays of intrinsics ``key`` (a rotation keeps lengths)."""
+    inv = _INV_NORM.get(key)
+    if inv is None:
+        d_cam = _DIR_CACHE[key]
+        inv = (1.0 / np.linalg.norm(d_cam.astype(np.float64), axis=-1)).astype(np.float32)
+        _INV_NORM.clear()
+        _INV_NORM[key] = inv
+    return inv
+
+
+def _intrinsics_key(camera: Camera) -> tuple:
+    K = camera.intrinsics
+    return (K.width, K.height, K.fx, K.fy, K.cx, K.cy)
 
 
 def pixel_rays(camera: Camera) -> np.ndarray:
@@ -74,7 +95,7 @@ def pixel_rays(camera: Camera) -> np.ndarray:
     (a 640x480 grid costs ~25 ms to rebuild in float64; the rotation alone costs ~2 ms).
     """
     K = camera.intrinsics
-    key = (K.width, K.height, K.fx, K.fy, K.cx, K.cy)
+    key = _intrinsics_key(camera)
     d_cam = _DIR_CACHE.get(key)
     if d_cam is None:
         u, v = np.meshgrid(np.arange(K.width, dtype=np.float64), np.arange(K.height, dtype=np.float64))
@@ -90,6 +111,7 @@ class RaycastScene:
     def __init__(self, nthreads: int = 0) -> None:
         self._scene = o3d.t.geometry.RaycastingScene(nthreads=nthreads)
         self._labels: list[int] = []
+        self._label_lut = np.array([NO_HIT], dtype=np.int32)
         self._meshes: list[trimesh.Trimesh] = []
         self.nthreads = nthreads
 
@@ -102,6 +124,7 @@ class RaycastScene:
             raise RuntimeError(f"unexpected open3d geometry id {gid}")
         self._labels.append(int(label))
         self._meshes.append(mesh)
+        self._label_lut = np.array(self._labels + [NO_HIT], dtype=np.int32)
         return gid
 
     @property
@@ -120,22 +143,16 @@ class RaycastScene:
         rays[..., :3] = camera.c2w[:3, 3]
         rays[..., 3:] = d
         out = self._scene.cast_rays(o3d.core.Tensor.from_numpy(rays), nthreads=self.nthreads)
-        t = out["t_hit"].numpy()
-        gid = out["geometry_ids"].numpy().astype(np.int64)
-        invalid = gid == int(o3d.t.geometry.RaycastingScene.INVALID_ID)
-        gid[invalid] = -1
-        prim = out["primitive_ids"].numpy().astype(np.int64)
-        prim[invalid] = -1
-        hit = ~invalid & np.isfinite(t)
-        depth = np.where(hit, t, 0).astype(np.float32)
-        labels = self.labels
-        label = np.full(gid.shape, NO_HIT, dtype=np.int32)
-        label[hit] = labels[gid[hit]]
-        normal = out["primitive_normals"].numpy()  # float32 buffers owned by us: no copies
-        normal[~hit] = 0
+        # open3d marks misses with INVALID_ID = 2**32 - 1 in uint32 id arrays, which read as int32 are -1;
+        # normals and barycentrics of misses are already 0. Views, not copies (this runs per frame).
+        gid = out["geometry_ids"].numpy().view(np.int32)
+        prim = out["primitive_ids"].numpy().view(np.int32)
+        hit = gid >= 0
+        depth = np.where(hit, out["t_hit"].numpy(), np.float32(0))
+        label = self._label_lut[gid]  # index -1 is the NO_HIT entry at the end
+        normal = out["primitive_normals"].numpy()
         bary = out["primitive_uvs"].numpy()
-        bary[~hit] = 0
-        return RayHits(depth, label, gid, prim, bary, normal, d)
+        return RayHits(depth, label, gid, prim, bary, normal, d, _intrinsics_key(camera))
 
     def hit_points(self, hits: RayHits, camera: Camera) -> np.ndarray:
         """(H, W, 3) world-frame hit points (origin + t · direction); NaN where nothing was hit."""
