@@ -11,6 +11,7 @@ Ablation switches (docs/pd2gs-parts.md has the table):
 * ``mask_provider``   — "grabcut" (default) | "sam" | "oracle" (the dataset's true part masks).
 * ``counter``         — "motion" (default) | "vlm" | "given" (oracle count from meta.json).
 * ``joint_rule``      — "paper" (residual-rank rule) | "bic" (ours: translation vs rotation by BIC).
+* ``split_disconnected`` — ours: split each motion cluster into spatially connected pieces.
 """
 from __future__ import annotations
 
@@ -46,6 +47,8 @@ class DiscoveryConfig:
     kmeans_seed: int = 0
     kmeans_n_init: int = 10
     n_states: int | None = None      # ablation: 2 or 4 states (None = all states of the field)
+    split_disconnected: bool = False  # ours: split clusters into spatially connected pieces (parts that
+                                      # always move together, e.g. equal drawers in multi-part states)
 
     # --- how many parts
     counter: str = "motion"

@@ -77,3 +77,45 @@ def coarse_labels(means: np.ndarray, n_parts: int, tau_mot: float, min_frac: flo
     if dyn.any() and n_parts > 0:
         labels[dyn] = cluster_trajectories(means[:, dyn], n_parts, min_frac, seed, n_init)
     return labels
+
+
+def split_disconnected(points: np.ndarray, labels: np.ndarray, min_size: int, radius: float | None = None
+                       ) -> np.ndarray:
+    """Ours (not in the paper): split every dynamic cluster into spatially connected pieces.
+
+    Parts that always move together (e.g. two drawers with equal limits in multi-part states) share one
+    trajectory and one cluster; if they do not touch they are separate parts. points: (N, 3) centres in
+    one state; labels: (N,) 0 static, 1..n. Pieces are connected within ``radius`` (default 3x the
+    median nearest-neighbour distance of the dynamic centres); pieces smaller than ``min_size`` join the
+    nearest kept piece of their cluster. -> relabelled (N,) 0, 1..n' (by decreasing size).
+    """
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    out = labels.copy()
+    dyn = np.flatnonzero(labels > 0)
+    if len(dyn) < 2:
+        return out
+    if radius is None:
+        d, _ = cKDTree(points[dyn]).query(points[dyn], k=2)
+        radius = 3.0 * float(np.median(d[:, 1]))
+    next_label = int(labels.max()) + 1
+    for c in np.unique(labels[dyn]):
+        idx = np.flatnonzero(labels == c)
+        tree = cKDTree(points[idx])
+        ncomp, comp = connected_components(tree.sparse_distance_matrix(tree, radius, output_type="coo_matrix"),
+                                           directed=False)
+        if ncomp == 1:
+            continue
+        sizes = np.bincount(comp)
+        keep = [k for k in np.argsort(-sizes) if sizes[k] >= min_size] or [int(np.argmax(sizes))]
+        kept = np.isin(comp, keep)
+        if (~kept).any():  # small pieces join the nearest kept piece
+            _, nn = cKDTree(points[idx[kept]]).query(points[idx[~kept]])
+            comp[~kept] = comp[kept][nn]
+        for k in keep[1:]:
+            out[idx[comp == k]] = next_label
+            next_label += 1
+    order = sorted(np.unique(out[out > 0]), key=lambda c: -np.sum(out == c))
+    remap = {c: i + 1 for i, c in enumerate(order)}
+    return np.array([remap.get(c, 0) for c in out], dtype=np.int64)

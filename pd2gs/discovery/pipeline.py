@@ -183,6 +183,10 @@ def discover(field_or_model: Any, obj, config: DiscoveryConfig | None = None) ->
         raise ObjectFailure(f"no movable part found ({int(dyn.sum())} dynamic Gaussians, count {n_parts})")
     labels = motion.coarse_labels(fld.means, n_parts, cfg.tau_mot, cfg.min_cluster_frac, cfg.kmeans_seed,
                                   cfg.kmeans_n_init)
+    if cfg.split_disconnected:
+        labels = motion.split_disconnected(fld.means[fld.index(ev["start"])], labels,
+                                           max(3, int(cfg.min_cluster_frac * max(1, int(dyn.sum())))))
+        diag["count"]["after_spatial_split"] = int(labels.max())
     diag["coarse_sizes"] = np.bincount(labels).tolist()
     if cfg.refine:
         fld, labels, diag["refine"] = refine_parts(fld, labels, obj, states, ev["start"], cfg)

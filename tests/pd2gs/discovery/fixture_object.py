@@ -97,5 +97,5 @@ def perfect_field(twin: Twin, meta, states: list[str], n: int = 2500, seed: int 
         R = T[:, :3, :3] @ rots0
         q = Rotation.from_matrix(R).as_quat()[:, [3, 0, 1, 2]]
         M.append(m); Q.append(q); S.append(scales)
-    colors = COLORS[labels]
+    colors = COLORS[labels % len(COLORS)]
     return StateField(list(states), np.stack(M), np.stack(Q), np.stack(S), colors, np.full(len(labels), 0.9)), labels

@@ -57,3 +57,20 @@ def test_small_clusters_are_merged():
     labels = cluster_trajectories(md, 3, min_frac=0.02)
     assert len(np.unique(labels)) == 2
     assert set(np.unique(labels)) == {1, 2}
+
+
+def test_split_disconnected_separates_parts_that_move_together():
+    from pd2gs.discovery.motion import split_disconnected
+    rng = np.random.default_rng(0)
+    a = rng.uniform([0, 0, 0], [0.3, 0.2, 0.01], (300, 3))          # two drawer fronts 5 cm apart,
+    b = rng.uniform([0, 0.25, 0], [0.3, 0.45, 0.01], (300, 3))      # same cluster (same motion)
+    speck = np.array([[0.1, 0.21, 0.0]])                             # one stray point between them
+    base = rng.uniform([-0.5, -0.5, -0.5], [0.5, 0.5, -0.4], (200, 3))
+    pts = np.concatenate([a, b, speck, base])
+    labels = np.concatenate([np.ones(601, int), np.zeros(200, int)])
+    out = split_disconnected(pts, labels, min_size=12)
+    assert set(out[:300]) == {1} or set(out[:300]) == {2}
+    assert set(out[300:600]) == ({1, 2} - set(out[:300]))
+    assert out[600] in (1, 2) and (out[200 + 400:] == 0)[1:].all()
+    # one connected cluster stays one part
+    assert np.array_equal(split_disconnected(pts[:300], np.ones(300, int), 12), np.ones(300, int))
