@@ -3,6 +3,7 @@
     pd2gs train OBJECT_DIR --out RUN [--states m0,m1,m2,m3] [--iters N] [--size 160x120]
                 [--backend cpu|reference|gsplat] [--seed S] [--depth-init] [--resume|--overwrite]
     pd2gs render RUN --state m0 [--to m3] [--t 0.5] [--frames 9] [--views 4] [--out DIR]
+    pd2gs eval RUN --object DIR --unseen u1,u2   (PSNR of unseen states via latent interpolation)
 
 Exit status 2 for invalid input (message names the path or option), no tracebacks.
 """
@@ -49,7 +50,31 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--views", type=int, default=4, help="cameras in the image strip")
     r.add_argument("--backend", default="cpu", choices=["cpu", "reference", "gsplat"])
     r.add_argument("--out", default=None, help="output folder (default RUN/renders)")
+    e = sub.add_parser("eval", help="PSNR on unseen states by latent interpolation")
+    e.add_argument("run", help="run folder written by pd2gs train")
+    e.add_argument("--object", required=True, help="RS-Art object folder holding the unseen states")
+    e.add_argument("--unseen", required=True, help="comma-separated unseen state ids")
+    e.add_argument("--backend", default="cpu", choices=["cpu", "reference", "gsplat"])
     return ap
+
+
+def _eval(args) -> int:
+    from pd2gs.data import load_frames
+    from pd2gs.evaluate import eval_unseen
+    from pd2gs.train import load_field, write_json_atomic
+
+    run = Path(args.run)
+    if not (run / "checkpoint.pt").is_file():
+        raise UsageError(f"{run}: not a pd2gs run folder (no checkpoint.pt)")
+    cfg, fld = load_field(run)
+    ids, frames = load_frames(args.object, args.unseen.split(","), cfg.size)
+    res = {}
+    for k, sid in enumerate(ids):
+        res[sid] = eval_unseen(fld, [f for f in frames if f.state == k], cfg.background, args.backend)
+        print(f"{sid}: PSNR {res[sid]['psnr']:.2f} dB (latent between states "
+              f"{cfg.states[res[sid]['segment'][0]]} and {cfg.states[res[sid]['segment'][1]]}, t = {res[sid]['t']:.1f})")
+    write_json_atomic(run / "unseen.json", res)
+    return 0
 
 
 def _train(args) -> int:
@@ -155,7 +180,7 @@ def main(argv: list[str] | None = None) -> int:
 
     args = _parser().parse_args(argv)
     try:
-        return _train(args) if args.cmd == "train" else _render(args)
+        return {"train": _train, "render": _render, "eval": _eval}[args.cmd](args)
     except (UsageError, DataError) as e:
         print(f"pd2gs: error: {e}", file=sys.stderr)
         return 2

@@ -92,6 +92,25 @@ def load_frames(object_dir: str | Path, states: list[str] | None, size: tuple[in
     return list(states), frames
 
 
+def object_bounds(object_dir: str | Path, states: list[str]) -> tuple[torch.Tensor, torch.Tensor] | None:
+    """Axis-aligned bounding box (lo, hi) (metres, world) of the object's twin over ``states``,
+    or None when the twin cannot be read."""
+    import rsart
+
+    try:
+        obj = rsart.load(Path(object_dir))
+        boxes = []
+        for sid in states:
+            for m in obj.twin.posed_meshes(obj.states[sid].values):
+                boxes.append(np.asarray(m.bounds))
+    except Exception:  # noqa: BLE001 - the twin is optional for training
+        return None
+    if not boxes:
+        return None
+    b = np.stack(boxes)
+    return torch.tensor(b[:, 0].min(0)).float(), torch.tensor(b[:, 1].max(0)).float()
+
+
 def backproject_frames(frames: list[Frame], max_points: int = 200_000) -> tuple[torch.Tensor, torch.Tensor]:
     """World points (M, 3) and colours (M, 3) from every frame with depth."""
     pts, cols = [], []

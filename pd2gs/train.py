@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from pd2gs.data import Frame, backproject_frames, camera_bounds
+from pd2gs.data import Frame, backproject_frames, camera_bounds, object_bounds
 from pd2gs.deform import DeformableField, DeformConfig
 from pd2gs.densify import DensifyStats, densify_and_prune, reset_opacity
 from pd2gs.gaussians import init_from_bounds, init_from_points
@@ -75,12 +75,18 @@ def estimate_background(frames: list[Frame]) -> tuple[float, float, float]:
 
 
 def build_field(cfg: TrainConfig, frames: list[Frame]) -> DeformableField:
-    """Canonical Gaussians from depth back-projection (cfg.depth_init) or the camera-derived
-    bounding box; deformation MLP at identity; K = len(cfg.states) latents."""
+    """Canonical Gaussians from depth back-projection (cfg.depth_init) or uniformly in the
+    object's bounding box (its twin over the training states, padded 10%; without a twin, a box
+    derived from the cameras); deformation MLP at identity; K = len(cfg.states) latents."""
     points = None
     if cfg.depth_init:
         points, colors = backproject_frames([f for f in frames if f.split == "train"])
-    lo, hi = camera_bounds(frames, points)
+    box = object_bounds(cfg.object_dir, cfg.states) if (points is None and cfg.object_dir) else None
+    if box is not None:
+        pad = 0.1 * (box[1] - box[0]).clamp(min=1e-3)
+        lo, hi = box[0] - pad, box[1] + pad
+    else:
+        lo, hi = camera_bounds(frames, points)
     if points is not None:
         g = init_from_points(points, colors, cfg.init_points, cfg.seed)
     else:

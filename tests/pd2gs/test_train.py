@@ -61,3 +61,14 @@ def test_cli_renders_states_and_interpolations(frames, tmp_path):
                  "--out", str(tmp_path / "anim")]) == 0
     assert Path(tmp_path / "anim" / "closed_to_open.gif").stat().st_size > 0
     assert main(["render", str(run), "--state", "nope"]) == 2
+
+
+def test_unseen_state_is_scored_by_latent_interpolation(frames):
+    from pd2gs.evaluate import eval_unseen
+
+    tr = Trainer(tiny_config(5), frames)
+    tr.run(progress=False)
+    unseen = [f for f in make_frames(angles_deg=(25.0,), views=4, size=(32, 24), n_gaussians=800)]
+    res = eval_unseen(tr.field, unseen, tr.cfg.background, steps=3)
+    assert res["segment"] == [0, 1] and res["t"] in (0.0, 0.5, 1.0)
+    assert res["views"] == {"fit": 2, "scored": 2} and 5 < res["psnr"] < 60

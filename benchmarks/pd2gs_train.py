@@ -1,0 +1,97 @@
+"""Benchmark: PD²GS training speed (and, with --object, a full default training run).
+
+Part 1 (always): iterations/s of a full training step (deformation MLP + rasterize + L1/D-SSIM
++ backward + Adam) at 128x128 with a fixed number of Gaussians (default 20k; density control
+off so the workload stays fixed), on the synthetic 2-part scene of ``pd2gs.synthetic``.
+Part 2 (--object DIR): ``pd2gs train`` defaults on an RS-Art object; wall time, it/s, test PSNR
+per state (and unseen-state PSNR via latent interpolation when --unseen-object is given).
+
+    python benchmarks/pd2gs_train.py [--object DIR] [--out benchmarks/results/pd2gs_train.json]
+"""
+from __future__ import annotations
+
+import pd2gs  # noqa: F401  (sets OMP_WAIT_POLICY before torch loads)
+
+import argparse
+import json
+import os
+import statistics
+import time
+from dataclasses import asdict
+from pathlib import Path
+
+import torch
+
+from pd2gs.synthetic import make_frames
+from pd2gs.train import TrainConfig, Trainer
+
+
+def step_speed(size: int, n: int, steps: int, backend: str) -> dict:
+    frames = make_frames(views=8, size=(size, size), n_gaussians=4000)
+    cfg = TrainConfig(states=["a", "b", "c", "d"], size=(size, size), iters=10**6, init_points=n,
+                      densify_from=10**7, opacity_reset_every=0, backend=backend)
+    tr = Trainer(cfg, frames)
+    for _ in range(3):
+        tr.step()
+    wall, cpu = [], []
+    for _ in range(steps):
+        t0, c0 = time.perf_counter(), time.process_time()
+        tr.step()
+        wall.append(time.perf_counter() - t0)
+        cpu.append(time.process_time() - c0)
+    med = statistics.median(wall)
+    return {"size": size, "gaussians": n, "backend": backend, "median_ms": 1e3 * med,
+            "it_per_s": 1 / med, "cpu_ms_per_step": 1e3 * statistics.median(cpu),
+            "mlp": asdict(cfg.deform)}
+
+
+def full_run(object_dir: str, iters: int | None) -> dict:
+    from pd2gs.data import load_frames
+
+    cfg = TrainConfig(object_dir=object_dir)
+    if iters:
+        cfg.iters = iters
+    cfg.states, frames = load_frames(object_dir, None, cfg.size)
+    t0 = time.perf_counter()
+    tr = Trainer(cfg, frames)
+    tr.run(progress=False)
+    secs = time.perf_counter() - t0
+    return {"object": object_dir, "states": cfg.states, "views": len(frames), "iters": cfg.iters,
+            "size": list(cfg.size), "seconds": secs, "it_per_s": cfg.iters / secs,
+            "gaussians": tr.field.gaussians.num, "test_psnr": tr.evaluate("test"),
+            "train_psnr": tr.evaluate("train")}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--sizes", default="128")
+    ap.add_argument("--counts", default="5000,20000")
+    ap.add_argument("--steps", type=int, default=15)
+    ap.add_argument("--backend", default="cpu")
+    ap.add_argument("--object", default=None, help="RS-Art object folder for a full default run")
+    ap.add_argument("--iters", type=int, default=None, help="override iterations of the full run")
+    ap.add_argument("--out", default="benchmarks/results/pd2gs_train.json")
+    args = ap.parse_args()
+    rows = []
+    for size in map(int, args.sizes.split(",")):
+        for n in map(int, args.counts.split(",")):
+            row = step_speed(size, n, args.steps, args.backend)
+            rows.append(row)
+            print(f"{size}x{size} N={n}: {row['it_per_s']:.1f} it/s ({row['median_ms']:.0f} ms, "
+                  f"cpu {row['cpu_ms_per_step']:.0f} ms)", flush=True)
+    result = {"benchmark": "pd2gs_train", "steps": rows, "loadavg_at_end": os.getloadavg(),
+              "torch": torch.__version__, "cpus": os.cpu_count(),
+              "note": "wall clock on a box shared with other jobs; cpu_ms_per_step is process CPU time"}
+    if args.object:
+        result["full_run"] = full_run(args.object, args.iters)
+        print(json.dumps(result["full_run"], indent=1))
+        result["loadavg_at_end"] = os.getloadavg()
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(args.out).with_suffix(".tmp")
+    tmp.write_text(json.dumps(result, indent=2))
+    tmp.replace(args.out)
+    print("wrote", args.out)
+
+
+if __name__ == "__main__":
+    main()
