@@ -1,0 +1,144 @@
+"""One interaction state from a raw recording to posed, masked views in the object frame.
+
+:func:`process_state` streams the recording twice (never holding more than the selected frames):
+
+1. score every frame (chroma-key mask, sharpness, exposure) and select ``n_views`` spread in time;
+2. re-read the selected frames; SfM (pycolmap, known intrinsics, features inside the dilated masks);
+   metric scale from depth; RGB-D bundle adjustment; leave-one-out depth ICP per view;
+3. pedestal plane (RANSAC on the background depth under the object) -> up direction, and pedestal
+   pixels dropped from the masks;
+4. twin registration (FPFH + RANSAC, ICP) of the twin posed at the state's joint values to the
+   fused object depth; cameras moved into the object (twin base) frame;
+5. part masks: the registered twin ray-cast per view (part index + 1) inside the chroma-key mask;
+   keyed pixels the twin misses take the nearest part label.
+"""
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+from scipy import ndimage
+
+from rsart.camera import Camera, Intrinsics
+from rsart.errors import RsartError
+from rsart.kinematics import Twin
+
+from . import chroma
+from .depth_align import refine_with_depth, view_points
+from .readers import RawFrame, Recording
+from .register import Registration, pedestal_plane, register_twin, up_alignment
+from .rgbd_ba import refine_rgbd
+from .select import score_frame, select_frames
+from .sfm import apply_scale, metric_scale, run_sfm
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class CaptureSettings:
+    """Knobs of the per-state pipeline (defaults suit 320x240 - 640x480 booth captures)."""
+
+    n_views: int = 30
+    chroma: chroma.ChromaSettings = field(default_factory=chroma.ChromaSettings)
+    feature_dilate_px: int = 9
+    rgbd_ba: bool = True
+    depth_icp: bool = True
+    icp_voxel: float = 0.004
+    seed: int = 0
+
+
+@dataclass
+class StateResult:
+    """Selected frames of one state with object-frame poses, part masks and the figures of each step."""
+
+    frames: list[RawFrame]
+    c2w: dict[str, np.ndarray]
+    masks: dict[str, np.ndarray]
+    registration: Registration
+    report: dict
+
+
+def process_state(rec: Recording, twin: Twin, values: dict[str, float],
+                  settings: CaptureSettings = CaptureSettings()) -> StateResult:
+    """Run steps 1-5 of the module docstring on one recording; raises :class:`RsartError` on failure."""
+    K = rec.intrinsics
+    # 1. scores (streamed)
+    scores, packed = [], {}
+    for f in rec:
+        m = chroma.key_object(f.rgb, settings.chroma)
+        scores.append(score_frame(f.index, f.timestamp, f.rgb, m))
+        packed[f.index] = (np.packbits(m), m.shape)  # 1 bit per pixel: masks of every frame stay small
+    chosen = set(select_frames(scores, settings.n_views))
+    frames = [f for f in rec if f.index in chosen]
+    if any(f.depth is None for f in frames):
+        raise RsartError(f"{rec.source}: the recording has no depth stream (needed for scale and registration)")
+    masks = {f.name: np.unpackbits(packed[f.index][0], count=int(np.prod(packed[f.index][1])))
+             .reshape(packed[f.index][1]).astype(bool) for f in frames}
+    del packed
+    names = {f.name: f"{f.name}.png" for f in frames}
+    # 2. SfM + metric scale + refinements
+    kern = np.ones((settings.feature_dilate_px, settings.feature_dilate_px), np.uint8)
+    feat_masks = {names[f.name]: cv2.dilate(masks[f.name].astype(np.uint8), kern) for f in frames}
+    sfm = run_sfm({names[f.name]: f.rgb for f in frames}, K, feat_masks, seed=settings.seed)
+    depths = {names[f.name]: f.depth for f in frames}
+    scale, n_ratios = metric_scale(sfm, depths)
+    sfm = apply_scale(sfm, scale)
+    report: dict = {"frames_total": len(scores), "frames_selected": len(frames),
+                    "sfm_registered": len(sfm.c2w), "sfm_reprojection_px": sfm.mean_reprojection_error,
+                    "metric_scale_ratios": n_ratios}
+    if settings.rgbd_ba:
+        sfm, ba = refine_rgbd(sfm, K, depths)
+        report["rgbd_ba"] = {"median_reproj_px": ba.median_reproj_px, "median_depth_residual_m": ba.median_depth_residual}
+    c2w = dict(sfm.c2w)
+    obj_masks = {names[f.name]: masks[f.name] for f in frames}
+    if settings.depth_icp:
+        c2w, icp_rmse = refine_with_depth(c2w, K, depths, obj_masks, voxel=settings.icp_voxel, stride=2)
+        report["depth_icp_rmse_m"] = icp_rmse
+    frames = [f for f in frames if names[f.name] in c2w]
+    if len(frames) < 3:
+        raise RsartError(f"{rec.source}: SfM registered only {len(frames)} frames")
+    # 3. pedestal plane from background depth
+    obj_pts = np.concatenate([view_points(K, f.depth, masks[f.name], c2w[names[f.name]], 2) for f in frames])
+    bg_pts = np.concatenate([view_points(K, f.depth, ~masks[f.name], c2w[names[f.name]], 3) for f in frames])
+    plane, n_in = pedestal_plane(bg_pts, obj_pts)
+    up_T = up_alignment(plane)
+    report["pedestal_plane_inliers"] = n_in
+    for f in frames:
+        w2c = np.linalg.inv(c2w[names[f.name]])
+        n_cam = w2c[:3, :3] @ plane[:3]
+        p0 = -plane[3] * plane[:3]
+        plane_cam = np.concatenate([n_cam, [-(n_cam @ (w2c[:3, :3] @ p0 + w2c[:3, 3]))]])
+        masks[f.name] = chroma.remove_plane(masks[f.name], f.depth, K, plane_cam)
+    obj_pts = np.concatenate([view_points(K, f.depth, masks[f.name], c2w[names[f.name]], 2) for f in frames])
+    # 4. twin registration
+    mesh = twin.whole_mesh(values)
+    reg = register_twin(mesh, obj_pts, up_T=up_T, seed=settings.seed)
+    report["registration"] = {k: v for k, v in reg.to_dict().items() if k != "T_world_to_capture"}
+    Tinv = np.linalg.inv(reg.T)
+    posed = {f.name: Tinv @ c2w[names[f.name]] for f in frames}
+    # 5. part masks
+    part_masks = part_masks_from_twin(twin, values, K, posed, masks)
+    return StateResult(frames, posed, part_masks, reg, report)
+
+
+def part_masks_from_twin(twin: Twin, values: dict[str, float], K: Intrinsics, c2w: dict[str, np.ndarray],
+                         keyed: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """(H, W) uint8 part index + 1 per view: the ray-cast twin inside the keyed mask (nearest label where
+    the twin misses a keyed pixel; 0 outside the keyed mask)."""
+    from rsart.render.raycast import build_scene
+
+    scene = build_scene([[m] for m in twin.posed_meshes(values)], [])
+    out = {}
+    for name, M in c2w.items():
+        lab = scene.cast(Camera(K, M)).part_mask().astype(np.uint8)
+        key = keyed[name]
+        hit = lab > 0
+        if hit.any():
+            idx = ndimage.distance_transform_edt(~hit, return_distances=False, return_indices=True)
+            filled = lab[idx[0], idx[1]]
+        else:
+            filled = np.ones_like(lab)
+        out[name] = np.where(key, filled, 0).astype(np.uint8)
+    return out
