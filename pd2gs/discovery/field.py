@@ -79,7 +79,8 @@ def as_state_field(model: Any, state_ids: list[str]) -> StateField:
 
     Accepts a StateField (returned as is, restricted to ``state_ids``) or any object with
     ``state_gaussians(state_id) -> dict`` of tensors/arrays ``means, quats, scales, colors,
-    opacities`` and optionally ``interpolate(state_a, state_b, t) -> same dict``.
+    opacities`` and optionally ``interpolate(state_a, state_b, t) -> same dict`` (the field at the latent
+    lerp(z_a, z_b, t)) and ``state_ids`` (the states it was trained on; :func:`discover` uses them).
     """
     if isinstance(model, StateField):
         return model.subset_states(state_ids)

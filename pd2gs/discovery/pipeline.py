@@ -168,7 +168,9 @@ def discover(field_or_model: Any, obj, config: DiscoveryConfig | None = None) ->
     cfg = config or DiscoveryConfig()
     t0 = time.perf_counter()
     ev = obj.meta.eval_states
-    all_states = field_or_model.state_ids if isinstance(field_or_model, StateField) else [s.id for s in obj.meta.states]
+    all_states = getattr(field_or_model, "state_ids", None)  # a StateField, or a model that lists its states
+    if all_states is None:                                   # else: the multi-part states (the paper trains on them)
+        all_states = [s.id for s in obj.meta.states if s.kind == "multi"]
     states = used_states(obj, list(all_states), cfg.n_states)
     for s in (ev["start"], ev["end"]):
         if s not in states:
