@@ -92,7 +92,7 @@ def run_sfm(images: dict[str, np.ndarray], intrinsics: Intrinsics, masks: dict[s
         opts.ba_refine_principal_point = False
         opts.ba_refine_extra_params = False
         opts.random_seed = seed
-        opts.num_threads = threads
+        opts.num_threads = 1  # single-threaded mapping: the same input gives the same poses (it is the cheap part)
         (work / "sparse").mkdir(exist_ok=True)
         models = pycolmap.incremental_mapping(db, work / "images", work / "sparse", options=opts)
         if not models:

@@ -21,6 +21,7 @@ COMMANDS = [
     "rsart.cli.convert",      # convert (PartNet-Mobility, URDF, USD)
     "rsart.cli.validate_submission",  # validate-submission
     "rsart.cli.adapters",     # adapters, export, import (method plug-ins, entry points rsart.adapters)
+    "rsart.cli.perturb",      # perturb (camera-pose noise / COLMAP poses)
 ]
 
 DESCRIPTION = """\
