@@ -45,7 +45,7 @@ def step_speed(size: int, n: int, steps: int, backend: str) -> dict:
             "mlp": asdict(cfg.deform)}
 
 
-def full_run(object_dir: str, iters: int | None) -> dict:
+def full_run(object_dir: str, iters: int | None, run_dir: str | None) -> dict:
     from pd2gs.data import load_frames
 
     cfg = TrainConfig(object_dir=object_dir)
@@ -53,7 +53,7 @@ def full_run(object_dir: str, iters: int | None) -> dict:
         cfg.iters = iters
     cfg.states, frames = load_frames(object_dir, None, cfg.size)
     t0 = time.perf_counter()
-    tr = Trainer(cfg, frames)
+    tr = Trainer(cfg, frames, Path(run_dir) if run_dir else None)
     tr.run(progress=False)
     secs = time.perf_counter() - t0
     return {"object": object_dir, "states": cfg.states, "views": len(frames), "iters": cfg.iters,
@@ -70,10 +70,12 @@ def main() -> None:
     ap.add_argument("--backend", default="cpu")
     ap.add_argument("--object", default=None, help="RS-Art object folder for a full default run")
     ap.add_argument("--iters", type=int, default=None, help="override iterations of the full run")
+    ap.add_argument("--run-dir", default=None, help="keep the full run's folder here (for pd2gs eval)")
+    ap.add_argument("--skip-steps", action="store_true", help="only the full run")
     ap.add_argument("--out", default="benchmarks/results/pd2gs_train.json")
     args = ap.parse_args()
     rows = []
-    for size in map(int, args.sizes.split(",")):
+    for size in map(int, args.sizes.split(",")) if not args.skip_steps else []:
         for n in map(int, args.counts.split(",")):
             row = step_speed(size, n, args.steps, args.backend)
             rows.append(row)
@@ -83,7 +85,7 @@ def main() -> None:
               "torch": torch.__version__, "cpus": os.cpu_count(),
               "note": "wall clock on a box shared with other jobs; cpu_ms_per_step is process CPU time"}
     if args.object:
-        result["full_run"] = full_run(args.object, args.iters)
+        result["full_run"] = full_run(args.object, args.iters, args.run_dir)
         print(json.dumps(result["full_run"], indent=1))
         result["loadavg_at_end"] = os.getloadavg()
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)

@@ -100,7 +100,8 @@ def rasterize(
     features = torch.cat([colors, proj.depths[:, None]], dim=1)
     if backend == "cpu":
         from pd2gs.render.cpu import bin_gaussians_cpu, rasterize_cpu
-        offsets, gids = bin_gaussians_cpu(proj.means2d, proj.depths, proj.radii, width, height)
+        offsets, gids = bin_gaussians_cpu(proj.means2d, proj.depths, proj.radii, width, height,
+                                          proj.conics, opacities)
         raster = rasterize_cpu
     else:
         from pd2gs.render.binning import bin_gaussians_torch

@@ -10,11 +10,18 @@ from pd2gs.render.reference import ALPHA_MAX, ALPHA_MIN, T_MIN
 
 
 def bin_gaussians_cpu(
-    means2d: torch.Tensor, depths: torch.Tensor, radii: torch.Tensor, width: int, height: int
+    means2d: torch.Tensor, depths: torch.Tensor, radii: torch.Tensor, width: int, height: int,
+    conics: torch.Tensor | None = None, opacities: torch.Tensor | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Same lists as ``binning.bin_gaussians_torch`` (offsets (T+1,), gids (P,)), as numpy."""
+    """Tile lists as ``binning.bin_gaussians_torch`` (offsets (T+1,), gids (P,)), as numpy.
+
+    With ``conics`` and ``opacities`` the 3DGS tile rectangles are first shrunk to the tiles
+    where alpha >= 1/255 is reachable, which drops only pairs that cannot contribute."""
     tiles_x, tiles_y = tile_grid(width, height)
-    rect = [r.numpy() for r in tile_rects(means2d, radii, width, height)]
+    rect = [r.numpy().copy() for r in tile_rects(means2d, radii, width, height)]
+    if conics is not None and opacities is not None:
+        kern.tighten_rects(*rect, means2d.detach().double().numpy(), conics.detach().double().numpy(),
+                           opacities.detach().double().numpy(), ALPHA_MIN)
     vis = torch.nonzero(radii > 0).flatten()
     order = vis[torch.argsort(depths.detach()[vis], stable=True)].numpy()
     xmin, xmax, ymin, ymax = rect

@@ -19,6 +19,34 @@ TILE = 16
 
 
 @njit(cache=True)
+def tighten_rects(xmin, xmax, ymin, ymax, means2d, conics, opac, amin):
+    """Shrink each 3DGS tile rectangle to the tiles the alpha >= amin ellipse
+    d^T conic d <= -2 log(amin / o) can reach (plus 1 px for rounding). Exact: the dropped
+    (tile, Gaussian) pairs have alpha < amin at every pixel and would be skipped anyway."""
+    for g in range(xmin.shape[0]):
+        o = opac[g]
+        if not o >= amin:
+            xmax[g] = xmin[g]
+            continue
+        ca, cb, cc = conics[g, 0], conics[g, 1], conics[g, 2]
+        det = ca * cc - cb * cb
+        if not det > 0:
+            continue
+        r2 = -2.0 * np.log(amin / o)
+        hx = np.sqrt(r2 * cc / det) + 1.0
+        hy = np.sqrt(r2 * ca / det) + 1.0
+        u, v = means2d[g, 0], means2d[g, 1]
+        xmin[g] = max(xmin[g], np.int64(np.floor((u - hx) / TILE)))
+        xmax[g] = min(xmax[g], np.int64(np.floor((u + hx) / TILE)) + 1)
+        ymin[g] = max(ymin[g], np.int64(np.floor((v - hy) / TILE)))
+        ymax[g] = min(ymax[g], np.int64(np.floor((v + hy) / TILE)) + 1)
+        if xmax[g] < xmin[g]:
+            xmax[g] = xmin[g]
+        if ymax[g] < ymin[g]:
+            ymax[g] = ymin[g]
+
+
+@njit(cache=True)
 def bin_tiles(xmin, xmax, ymin, ymax, order, tiles_x, n_tiles):
     """Depth-sorted tile lists. order: (N,) Gaussian ids sorted front to back.
 
