@@ -113,6 +113,8 @@ class BagRecording(Recording):
 
     def _first(self, topic_pred, where: str):
         conns = [c for c in self._reader.connections if topic_pred(c.topic)]
+        if not conns:  # (rosbags reads *every* topic when given no connections)
+            return None, None
         for conn, _, raw in self._reader.messages(connections=conns):
             try:
                 return self._ts.deserialize_ros1(raw, conn.msgtype), conn.topic
@@ -240,11 +242,12 @@ class BagRecording(Recording):
 
 def write_realsense_bag(path: str | Path, frames: list[tuple[float, np.ndarray, np.ndarray]], colour: Intrinsics,
                         depth_scale: float, depth_k: Intrinsics | None = None,
-                        depth_to_colour: np.ndarray | None = None) -> None:
+                        depth_to_colour: np.ndarray | None = None, extrinsics: bool = True) -> None:
     """Write a small RealSense-style ROS1 bag: ``frames`` = (time s, (H, W, 3) uint8 RGB, (h, w) uint16 depth units).
 
     For tests and examples (a real bag comes from the RealSense Viewer). ``depth_to_colour`` (4, 4) is stored as the
-    depth stream's tf with the colour stream as the reference (identity tf for colour).
+    depth stream's tf with the colour stream as the reference (identity tf for colour); ``extrinsics=False`` leaves
+    both tf topics out (as some recorders do).
     """
     from rosbags.rosbag1 import Writer
     from scipy.spatial.transform import Rotation
@@ -282,16 +285,18 @@ def write_realsense_bag(path: str | Path, frames: list[tuple[float, np.ndarray, 
         c_info = conn("/device_0/sensor_1/Color_0/info/camera_info", "sensor_msgs/msg/CameraInfo")
         d_info = conn("/device_0/sensor_0/Depth_0/info/camera_info", "sensor_msgs/msg/CameraInfo")
         units = conn("/device_0/sensor_0/option/Depth Units/value", "std_msgs/msg/Float32")
-        c_tf = conn("/device_0/sensor_1/Color_0/tf/0", "geometry_msgs/msg/Transform")
-        d_tf = conn("/device_0/sensor_0/Depth_0/tf/0", "geometry_msgs/msg/Transform")
+        if extrinsics:
+            c_tf = conn("/device_0/sensor_1/Color_0/tf/0", "geometry_msgs/msg/Transform")
+            d_tf = conn("/device_0/sensor_0/Depth_0/tf/0", "geometry_msgs/msg/Transform")
         c_img = conn(COLOUR_TOPIC, "sensor_msgs/msg/Image")
         d_img = conn(DEPTH_TOPIC, "sensor_msgs/msg/Image")
         ser = ts.serialize_ros1
         w.write(c_info, ns(t0), ser(info(colour, t0), "sensor_msgs/msg/CameraInfo"))
         w.write(d_info, ns(t0), ser(info(depth_k, t0), "sensor_msgs/msg/CameraInfo"))
         w.write(units, ns(t0), ser(T["std_msgs/msg/Float32"](data=float(depth_scale)), "std_msgs/msg/Float32"))
-        w.write(c_tf, ns(t0), ser(tf(np.eye(4)), "geometry_msgs/msg/Transform"))
-        w.write(d_tf, ns(t0), ser(tf(d2c), "geometry_msgs/msg/Transform"))
+        if extrinsics:
+            w.write(c_tf, ns(t0), ser(tf(np.eye(4)), "geometry_msgs/msg/Transform"))
+            w.write(d_tf, ns(t0), ser(tf(d2c), "geometry_msgs/msg/Transform"))
         for seq, (t, rgb, dep) in enumerate(frames):
             h, wd = rgb.shape[:2]
             im = T["sensor_msgs/msg/Image"](header=header(t, seq, "color"), height=h, width=wd, encoding="rgb8",
