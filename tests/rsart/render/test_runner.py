@@ -90,7 +90,8 @@ def test_rerun_skips_finished_views_and_refuses_other_settings(locker_dir, tmp_p
 
 def test_protocols_share_a_folder_when_their_states_agree(locker_dir, tmp_path):
     out = tmp_path / "out"
-    base = [str(locker_dir), "--out", str(out), "--test-views", "1", "--rgb-backend", "raycast", *SMALL]
+    base = [str(locker_dir), "--out", str(out), "--test-views", "1", "--rgb-backend", "raycast", "--workers", "1",
+            *SMALL]
     assert main([*base, "--protocol", "pd2gs", "--views", "2"]) == 0
     assert main([*base, "--protocol", "unseen"]) == 0  # training states + held-out states together
     states = sorted(p.name for p in (out / "locker-0000" / "states").iterdir())
