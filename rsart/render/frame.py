@@ -110,7 +110,7 @@ class StateRenderer:
             K = options.intrinsics
             self._raster = rgb_renderer or shared_renderer(K.width, K.height, self.backend.split("-", 1)[1],
                                                            options.lighting, options.antialias)
-            self._raster.set_scene([m for ms in parts for m in ms], znear, zfar)
+            self._gl_scene = self._raster.make_scene([m for ms in parts for m in ms], znear, zfar)
 
     def render(self, c2w: np.ndarray, rng: np.random.Generator) -> Frame:
         """Render the view with camera-to-world ``c2w`` (4, 4, OpenCV); ``rng`` drives backgrounds/noise."""
@@ -122,7 +122,7 @@ class StateRenderer:
         obj = hits.label >= 0
         reconciled = 0
         if self._raster is not None:
-            rgb, alpha = self._raster.render(cam)
+            rgb, alpha = self._raster.render(cam, self._gl_scene)
             if alpha is None:
                 alpha = obj.astype(np.float32)
             elif opt.reconcile and not opt.antialias:
@@ -184,4 +184,5 @@ class StateRenderer:
         """Release this state's scenes (the process-wide GL renderer stays for the next state)."""
         self.scene = None
         self._shader = None
+        self._gl_scene = None
 

@@ -153,6 +153,16 @@ def _ordered_node(pr, seq: int, mesh):
     return OrderedNode(mesh=mesh, matrix=np.eye(4))
 
 
+@dataclass
+class GLScene:
+    """A pyrender scene with its camera and headlight nodes (moved to each view's pose)."""
+
+    scene: object
+    cam: object
+    cam_node: object
+    light_node: object
+
+
 class PyrenderRgb:
     """Rasterised RGB of a static mesh set with pyrender; one OpenGL context per instance."""
 
@@ -173,35 +183,36 @@ class PyrenderRgb:
         self.lighting = lighting
         self.antialias = antialias
         self._renderer = pyrender.OffscreenRenderer(width, height)
-        self._scene = None
 
-    def set_scene(self, meshes: list[trimesh.Trimesh], znear: float, zfar: float) -> None:
-        """Upload world-frame meshes (with their colours/textures), drawn in list order; clip at ``znear``/``zfar``."""
+    def make_scene(self, meshes: list[trimesh.Trimesh], znear: float, zfar: float) -> "GLScene":
+        """A scene of world-frame meshes (with their colours/textures), drawn in list order, clipped at
+        ``znear``/``zfar``. Scenes are uploaded to GL when first rendered; rendering another scene
+        releases the previous one's buffers (pyrender keeps one scene's meshes in the context)."""
         pr = self._pr
         a = self.lighting.ambient
         scene = pr.Scene(bg_color=[0.0, 0.0, 0.0, 0.0], ambient_light=[a, a, a])
         for i, m in enumerate(meshes):
             scene.add_node(_ordered_node(pr, i, pr.Mesh.from_trimesh(_linear_colours(m), smooth=False)))
-        self._cam = pr.IntrinsicsCamera(1, 1, 0, 0, znear=znear, zfar=zfar)
-        self._cam_node = scene.add(self._cam, pose=np.eye(4))
-        self._light_node = scene.add(pr.DirectionalLight(color=np.ones(3), intensity=self.lighting.headlight),
-                                     pose=np.eye(4))
-        self._scene = scene
+        cam = pr.IntrinsicsCamera(1, 1, 0, 0, znear=znear, zfar=zfar)
+        cam_node = scene.add(cam, pose=np.eye(4))
+        light_node = scene.add(pr.DirectionalLight(color=np.ones(3), intensity=self.lighting.headlight),
+                               pose=np.eye(4))
+        return GLScene(scene, cam, cam_node, light_node)
 
-    def render(self, camera: Camera) -> tuple[np.ndarray, np.ndarray | None]:
+    def render(self, camera: Camera, scene: "GLScene") -> tuple[np.ndarray, np.ndarray | None]:
         """(H, W, 3) uint8 RGB premultiplied over black and (H, W) float32 coverage in [0, 1]
         (None when the platform cannot read alpha back; the caller then uses the ray-cast coverage)."""
         K = camera.intrinsics
         if (K.width, K.height) != (self.width, self.height):
             raise ValueError(f"renderer is {self.width}x{self.height}, camera is {K.width}x{K.height}")
-        self._cam.fx, self._cam.fy = K.fx, K.fy
-        self._cam.cx, self._cam.cy = K.cx + 0.5, K.cy + 0.5  # OpenGL pixel centres are at i + 0.5
+        scene.cam.fx, scene.cam.fy = K.fx, K.fy
+        scene.cam.cx, scene.cam.cy = K.cx + 0.5, K.cy + 0.5  # OpenGL pixel centres are at i + 0.5
         pose = camera.c2w_opengl()
-        self._scene.set_pose(self._cam_node, pose)
-        self._scene.set_pose(self._light_node, pose)
+        scene.scene.set_pose(scene.cam_node, pose)
+        scene.scene.set_pose(scene.light_node, pose)
         self._module._rsart_antialias = self.antialias
         flags = self._pr.RenderFlags.RGBA | self._pr.RenderFlags.SKIP_CULL_FACES
-        colour, _ = self._renderer.render(self._scene, flags=flags)
+        colour, _ = self._renderer.render(scene.scene, flags=flags)
         if colour.shape[-1] < 4:  # pyrender's OSMesa path reads back RGB only: no coverage available
             return np.ascontiguousarray(colour[..., :3]), None
         return np.ascontiguousarray(colour[..., :3]), colour[..., 3].astype(np.float32) / 255.0

@@ -86,3 +86,18 @@ def test_locker_parts_do_not_interpenetrate(locker):
     body, door, drawer = meshes
     for m in (door, drawer):
         assert not trimesh.proximity.signed_distance(body, m.vertices).max() > 0  # no vertex inside the body
+
+
+def test_state_renderers_alive_together_render_their_own_state(locker, small_intrinsics, gl_backend):
+    """Renderers share one GL context per process but each keeps its own scene."""
+    opts = RenderOptions(intrinsics=small_intrinsics, background="plain", plain_colour=BG)
+    b = locker.bounds({"door_hinge": 1.5, "drawer_slide": 0.2})
+    r = fit_radius(b, small_intrinsics)
+    closed = StateRenderer(locker, {"door_hinge": 0.0, "drawer_slide": 0.0}, opts, b, r)
+    opened = StateRenderer(locker, {"door_hinge": 1.5, "drawer_slide": 0.2}, opts, b, r)
+    c2w = orbit_pose(b.mean(0), r, 0.3, 0.7)
+    rng = np.random.default_rng
+    a1, o1, a2 = closed.render(c2w, rng(0)), opened.render(c2w, rng(0)), closed.render(c2w, rng(0))
+    assert np.array_equal(a1.rgb, a2.rgb) and not np.array_equal(a1.mask, o1.mask)
+    for f in (a1, o1):
+        assert np.array_equal(_silhouette(f.rgb), f.mask > 0)
