@@ -33,13 +33,12 @@ from .kinematics import Twin, TwinPart
 MAX_URDF_BYTES = 20 * 1024 * 1024
 MOVING = {"revolute": "revolute", "continuous": "revolute", "prismatic": "prismatic"}
 
-
 def _safe_name(s: str) -> str:
     out = re.sub(r"[^A-Za-z0-9_.\-]", "_", s).strip("._-") or "part"
     return out[:100]
 
-
-def _check_xml(data: bytes, source: str) -> None:
+def check_xml(data: bytes, source: str) -> None:
+    """Refuse XML with a DTD or entities (billion laughs, external entities) and malformed XML; raises RsartError."""
     import defusedxml.ElementTree as DET
     from defusedxml import DefusedXmlException
 
@@ -50,7 +49,6 @@ def _check_xml(data: bytes, source: str) -> None:
                          "URDF files need neither") from None
     except Exception as e:  # ParseError and friends
         raise RsartError(f"{source}: not well-formed XML ({e})") from None
-
 
 def load_mesh_file(path: Path, scale: np.ndarray | None = None) -> list[trimesh.Trimesh]:
     """Load a mesh file (OBJ/PLY/STL/GLB/DAE) as a list of trimeshes, textures kept where present."""
@@ -70,7 +68,6 @@ def load_mesh_file(path: Path, scale: np.ndarray | None = None) -> list[trimesh.
         for m in meshes:
             m.apply_transform(S)
     return meshes
-
 
 def _geometry_meshes(geom, base_dir: Path, source: str, where: str) -> list[trimesh.Trimesh]:
     if geom is None:
@@ -98,7 +95,6 @@ def _geometry_meshes(geom, base_dir: Path, source: str, where: str) -> list[trim
         return load_mesh_file(p, geom.mesh.scale if geom.mesh.scale is not None else None)
     return []
 
-
 def read_urdf(path: str | os.PathLike, *, use: str = "visual", load_meshes: bool = True) -> Twin:
     """Read a URDF file into a :class:`Twin` (see module docstring for the rules).
 
@@ -116,7 +112,7 @@ def read_urdf(path: str | os.PathLike, *, use: str = "visual", load_meshes: bool
     if size > MAX_URDF_BYTES:
         raise RsartError(f"{source}: {size} bytes exceeds the URDF size limit of {MAX_URDF_BYTES}")
     data = path.read_bytes()
-    _check_xml(data, source)
+    check_xml(data, source)
     try:
         urdf = yourdfpy.URDF.load(io.BytesIO(data), load_meshes=False, build_scene_graph=False,
                                   build_collision_scene_graph=False, load_collision_meshes=False)
@@ -233,15 +229,12 @@ def read_urdf(path: str | os.PathLike, *, use: str = "visual", load_meshes: bool
                             ax_w / np.linalg.norm(ax_w), Tc[:3, 3].copy(), lim, extra))
     return Twin(_safe_name(robot.name or path.stem), parts, joints)
 
-
 # ----------------------------------------------------------------------------- writing
 def _f(x: float) -> str:
     return repr(float(x))
 
-
 def _v(a) -> str:
     return " ".join(_f(x) for x in a)
-
 
 def urdf_text(twin: Twin, visual_files: dict[int, str], mesh_dir: str = "visual",
               masses: dict[int, float] | None = None) -> str:
@@ -279,7 +272,7 @@ def urdf_text(twin: Twin, visual_files: dict[int, str], mesh_dir: str = "visual"
     lines.append("</robot>")
     return "\n".join(lines) + "\n"
 
-
 def write_urdf(twin: Twin, path: str | os.PathLike, visual_files: dict[int, str], mesh_dir: str = "visual") -> None:
     """Write ``twin`` as URDF at ``path`` (atomically); meshes are expected in ``<dir of path>/<mesh_dir>/``."""
     atomic_write_text(path, urdf_text(twin, visual_files, mesh_dir))
+

@@ -143,10 +143,10 @@ def _link_transforms(urdf_path: Path) -> dict[str, np.ndarray]:
 
     import yourdfpy
 
-    from ..urdf import _check_xml
+    from ..urdf import check_xml
 
     data = urdf_path.read_bytes()
-    _check_xml(data, str(urdf_path))
+    check_xml(data, str(urdf_path))
     try:
         robot = yourdfpy.URDF.load(io.BytesIO(data), load_meshes=False, build_scene_graph=False,
                                    build_collision_scene_graph=False, load_collision_meshes=False).robot
