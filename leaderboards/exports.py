@@ -12,7 +12,8 @@ from sqlalchemy.engine import Engine
 from . import schema as S
 from .html import INFO, esc, page, present_metrics
 from .paper import load_tables
-from .site import (COMPARE_TABLES, _method_label, comparison_html, group_subs, leaderboard_sections, method_pages,
+from .site import (COMPARE_TABLES, _method_label, comparison_html, group_subs, latest_per_method,
+                   leaderboard_sections, method_pages,
                    metrics_page, part_index_means, published_table_html)
 from .store import SubmissionRow, list_submissions
 from .tracks import Track
@@ -82,8 +83,9 @@ def published_csv() -> str:
 
 def index_body(engine: Engine, subs: list[SubmissionRow], prefix: str = "") -> str:
     tables = {t.key: t for t in load_tables()}
-    parts = part_index_means(engine, [s.id for s in subs])
-    comp = [comparison_html(tables[k], subs, parts) for k in COMPARE_TABLES if k in tables]
+    latest = latest_per_method(subs)
+    parts = part_index_means(engine, [s.id for s in latest])
+    comp = [comparison_html(tables[k], latest, parts) for k in COMPARE_TABLES if k in tables]
     comp = [c for c in comp if c]
     pub = [published_table_html(tables[k]) for k in COMPARE_TABLES if k in tables]
     return (leaderboard_sections(subs, prefix)
@@ -110,7 +112,7 @@ def build_site(engine: Engine, out: str | Path, *, plots: bool = True) -> Path:
         (tmp / "index.html").write_text(page("rsart leaderboard", index_body(engine, subs)), encoding="utf-8")
         (tmp / "published.html").write_text(published_page(), encoding="utf-8")
         (tmp / "metrics.html").write_text(metrics_page(), encoding="utf-8")
-        (tmp / "methods.html").write_text(page("Methods", method_pages(subs, tmp, plots)), encoding="utf-8")
+        (tmp / "methods.html").write_text(page("Methods", method_pages(subs, tmp, plots, previous=out if out.is_dir() else None)), encoding="utf-8")
         (tmp / "leaderboard.md").write_text(leaderboard_markdown(subs), encoding="utf-8")
         (tmp / "leaderboard.csv").write_text(leaderboard_csv(subs, by_category=False), encoding="utf-8")
         (tmp / "leaderboard_by_category.csv").write_text(leaderboard_csv(subs, by_category=True), encoding="utf-8")

@@ -9,20 +9,18 @@ method with per-category plots, ``downloads.html``; exports ``leaderboard.md``, 
 """
 from __future__ import annotations
 
-import csv
 import io
 import time
 from collections import defaultdict
 from pathlib import Path
 
-from rsart.io import atomic_dir
 from sqlalchemy import and_, func, select
 from sqlalchemy.engine import Engine
 
 from . import schema as S
-from .html import (CORE, INFO, Cell, agg_cell, esc, header, metric_cell, page, present_metrics, slug, table)
-from .paper import DISPLAY, PAPER_METHOD_INPUTS, PaperTable, load_tables
-from .store import SubmissionRow, list_submissions
+from .html import CORE, INFO, Cell, agg_cell, esc, header, metric_cell, page, present_metrics, slug, table
+from .paper import PAPER_METHOD_INPUTS, PaperTable
+from .store import SubmissionRow
 from .tracks import Track
 
 #: Paper column → our category ids (case-insensitive aliases).
@@ -39,6 +37,8 @@ for _i in range(3):
     PAPER_GROUPS.update({f"Axis Ang {_i}": ("axis_ang", _i), f"Axis Pos {_i}": ("axis_pos", _i),
                          f"Part Motion {_i}": ("part_motion", _i), f"CD-m {_i}": ("cd_m", _i)})
 COMPARE_TABLES = ("partnet_main", "rsart_main")
+#: Metrics drawn in the per-method plots.
+PLOT_METRICS = ("cd_s", "cd_m", "cd_w", "axis_ang", "axis_pos", "part_motion_rev")
 
 
 def _date(t: float) -> str:
@@ -49,12 +49,26 @@ def _method_label(s: SubmissionRow) -> str:
     return f"{s.method_name} {s.method_version}".strip()
 
 
-def group_subs(subs: list[SubmissionRow]) -> dict[str, dict[str, list[SubmissionRow]]]:
-    """dataset label → track key → submissions (insertion order)."""
+def group_subs(subs: list[SubmissionRow], latest_only: bool = False) -> dict[str, dict[str, list[SubmissionRow]]]:
+    """dataset label → track key → submissions (insertion order); with ``latest_only`` one row per method
+    (its newest submission in that dataset and track; every submission stays on the method's page)."""
     out: dict[str, dict[str, list[SubmissionRow]]] = {}
     for s in subs:
         out.setdefault(s.dataset_label, {}).setdefault(Track(**s.track).key(), []).append(s)
+    if latest_only:
+        for tracks in out.values():
+            for k, ss in tracks.items():
+                newest: dict[str, SubmissionRow] = {}
+                for s in ss:
+                    if s.method_name not in newest or s.created_at >= newest[s.method_name].created_at:
+                        newest[s.method_name] = s
+                tracks[k] = [s for s in ss if newest[s.method_name] is s]
     return out
+
+
+def latest_per_method(subs: list[SubmissionRow]) -> list[SubmissionRow]:
+    """Newest submission of each method in each dataset and track."""
+    return [s for tracks in group_subs(subs, latest_only=True).values() for ss in tracks.values() for s in ss]
 
 
 def _row_head(s: SubmissionRow, prefix: str) -> list[Cell]:
@@ -90,8 +104,9 @@ def leaderboard_sections(subs: list[SubmissionRow], prefix: str = "") -> str:
     if not subs:
         return "<p>No scored submissions yet.</p>"
     metrics = present_metrics(subs)
-    parts = []
-    for ds, tracks in group_subs(subs).items():
+    parts = ['<p class="note">One row per method and track: its newest submission (all submissions are on the '
+             f'<a href="{prefix}methods.html">method pages</a>).</p>']
+    for ds, tracks in group_subs(subs, latest_only=True).items():
         parts.append(f'<h2>{esc(ds)} <span class="badge computed">computed here</span></h2>')
         for tk, ss in tracks.items():
             tr = Track(**ss[0].track)
@@ -111,7 +126,8 @@ def published_table_html(t: PaperTable) -> str:
     heads = ([t.group_kind.capitalize()] if any(r.group for r in t.rows) else []) + ["Method"] + list(t.columns)
     rows = []
     for r in t.rows:
-        cells = ([Cell(r.group or "")] if any(x.group for x in t.rows) else []) + [Cell(r.display)]
+        name = r.display + (" (RGB-D input)" if PAPER_METHOD_INPUTS.get(r.method) == "rgbd" else "")
+        cells = ([Cell(r.group or "")] if any(x.group for x in t.rows) else []) + [Cell(name)]
         for c in r.cells:
             title = "failed on ≥1 object" if c.failed else ("" if c.applicable else "not applicable")
             cells.append(Cell(c.text, c.value, "n fail" if c.failed else "n", title))
@@ -187,7 +203,9 @@ def comparison_html(t: PaperTable, subs: list[SubmissionRow], parts: dict) -> st
             f'<p class="note">Italic rows: <span class="badge published">published</span> in the PD²GS paper '
             f'({esc(t.cite())}), not re-run here. Other rows: <span class="badge computed">computed here</span> on '
             f'our datasets (categories matched by name; Part Motion in ° for revolute, scene units for prismatic '
-            f'parts). Published and computed rows are never ranked together.</p>'
+            f'parts). Our rows come from our own datasets (other objects, often in metres, not in the scene units '
+            f'of the paper), so they show the protocol at work, not a re-run of the paper. Published and computed rows are '
+            f'never ranked together.</p>'
             + table(heads, rows, sortable=False, row_classes=classes))
 
 
@@ -226,10 +244,13 @@ def method_plot(s: SubmissionRow, metrics: list[str]) -> bytes:
     import matplotlib.pyplot as plt
 
     cats = sorted(c for c in s.agg if c != S.MEAN)
-    keys = [k for k in metrics if any(s.agg[c].get(k, (None, 0, 0))[0] is not None for c in cats)] or metrics[:1]
-    ncol = 3
+    keys = [k for k in PLOT_METRICS if k in metrics
+            and any(s.agg[c].get(k, (None, 0, 0))[0] is not None for c in cats)] or metrics[:1]
+    ncol = min(3, len(keys))
     nrow = (len(keys) + ncol - 1) // ncol
-    fig, axes = plt.subplots(nrow, ncol, figsize=(4 * ncol, 2.6 * nrow), squeeze=False)
+    # fixed margins instead of tight_layout: matplotlib's layout pass dominated the site build time
+    fig, axes = plt.subplots(nrow, ncol, figsize=(4 * ncol, 2.8 * nrow), squeeze=False)
+    fig.subplots_adjust(left=0.06, right=0.98, top=0.9, bottom=0.28, hspace=0.9, wspace=0.25)
     for ax, k in zip(axes.flat, keys):
         info = INFO[k]
         vals = [s.agg[c].get(k, (None, 0, 0)) for c in cats]
@@ -244,14 +265,15 @@ def method_plot(s: SubmissionRow, metrics: list[str]) -> bytes:
     for ax in list(axes.flat)[len(keys):]:
         ax.axis("off")
     fig.suptitle(f"{_method_label(s)} on {s.dataset_label}", fontsize=10)
-    fig.tight_layout()
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=80)
+    fig.savefig(buf, format="png", dpi=72)
     plt.close(fig)
     return buf.getvalue()
 
 
-def method_pages(subs: list[SubmissionRow], out: Path, plots: bool = True) -> str:
+def method_pages(subs: list[SubmissionRow], out: Path, plots: bool = True, previous: Path | None = None) -> str:
+    """Write ``out/methods/*.html`` (+ PNGs) → the methods index body. A plot is named after its submission
+    id, so an unchanged one is copied from the ``previous`` site instead of being drawn again."""
     by: dict[str, list[SubmissionRow]] = {}
     for s in subs:
         by.setdefault(s.method_name, []).append(s)
@@ -269,8 +291,12 @@ def method_pages(subs: list[SubmissionRow], out: Path, plots: bool = True) -> st
             body.append(f"<h2>{esc(ds)} (latest: {esc(_method_label(s))}, {_date(s.created_at)})</h2>")
             body.append(paper_style_table([s], metrics))
             if plots:
-                png = f"{sl}-{slug(ds)}.png"
-                (out / "methods" / png).write_bytes(method_plot(s, metrics))
+                png = f"{sl}-{slug(ds)}-s{s.id}.png"
+                old = previous / "methods" / png if previous is not None else None
+                if old is not None and old.is_file() and not old.is_symlink():
+                    (out / "methods" / png).write_bytes(old.read_bytes())
+                else:
+                    (out / "methods" / png).write_bytes(method_plot(s, metrics))
                 body.append(f'<img src="{esc(png)}" alt="per-category plot of {esc(name)} on {esc(ds)}">')
         body.append("<h2>All submissions</h2>" + ranking_table(ss, S.MEAN, metrics))
         (out / "methods" / f"{sl}.html").write_text(page(f"Method: {name}", "\n".join(body), prefix="../"),

@@ -1,14 +1,13 @@
 """Session fixtures: one tiny generated dataset, its GT / perturbed / partly-failed submissions, scored once."""
 from __future__ import annotations
 
-import shutil
 import sys
 from pathlib import Path
 
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
-from lb_helpers import build_dataset, make_submission, score  # noqa: E402
+from lb_helpers import build_dataset, make_submission, score_many  # noqa: E402
 
 
 @pytest.fixture(scope="session")
@@ -30,21 +29,10 @@ def one_object(lb_root) -> Path:
 @pytest.fixture(scope="session")
 def scored(lb_root, dataset) -> dict[str, Path]:
     """rsart-eval output folders: gt, perturbed (axis 5°), partly failed (one null object)."""
-    out = {}
     gt = make_submission(dataset, lb_root / "sub_gt")
-    out["gt"] = score(gt, dataset, lb_root / "eval_gt")
     pert = make_submission(dataset, lb_root / "sub_pert", perturb="axis=5deg,pivot=0.02,seed=0", method="perturbed")
-    out["perturbed"] = score(pert, dataset, lb_root / "eval_pert")
     fail = make_submission(dataset, lb_root / "sub_fail", method="half-failed", null=("door-0001",))
-    out["failed"] = score(fail, dataset, lb_root / "eval_fail")
-    return out
+    outs = score_many([(gt, dataset, lb_root / "eval_gt"), (pert, dataset, lb_root / "eval_pert"),
+                       (fail, dataset, lb_root / "eval_fail")])
+    return dict(zip(("gt", "perturbed", "failed"), outs))
 
-
-@pytest.fixture
-def fresh(tmp_path) -> Path:
-    return tmp_path
-
-
-def copy_tree(src: Path, dst: Path) -> Path:
-    shutil.copytree(src, dst)
-    return dst

@@ -55,10 +55,18 @@ def make_submission(data: Path, out: Path, perturb: str | None = None, method: s
 
 def score(sub_dir: Path, data: Path, out: Path) -> Path:
     """Run the real rsart-eval CLI (small Chamfer settings) → its output folder."""
-    r = subprocess.run([PY, "-m", "rsart.evaluation.cli", str(sub_dir / "submission.json"), "--data", str(data),
-                        "--out", str(out), *FAST_EVAL], capture_output=True, text=True, cwd=REPO, env=env())
-    assert r.returncode == 0, r.stderr
-    return out
+    return score_many([(sub_dir, data, out)])[0]
+
+
+def score_many(jobs: list[tuple[Path, Path, Path]]) -> list[Path]:
+    """Several rsart-eval runs at once (sub_dir, data, out) → output folders."""
+    procs = [subprocess.Popen([PY, "-m", "rsart.evaluation.cli", str(s / "submission.json"), "--data", str(d),
+                               "--out", str(o), *FAST_EVAL], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                              text=True, cwd=REPO, env=env()) for s, d, o in jobs]
+    for p in procs:
+        _out, err = p.communicate(timeout=300)
+        assert p.returncode == 0, err
+    return [o for _s, _d, o in jobs]
 
 
 def env() -> dict:
