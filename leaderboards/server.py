@@ -147,9 +147,10 @@ def create_app(cfg: ServerConfig) -> FastAPI:
             folder, sub_file, method = await run_in_threadpool(_validate, job_id, dest)
         except ArchiveError as e:
             return _error(422, f"unsafe or unusable archive: {e}")
-        except _Invalid as e:
+        except _Invalid as e:  # server folders are cut from the messages: paths are relative to the archive
+            root = str(cfg.work / "jobs" / job_id / "submission") + os.sep
             return _error(422, f"invalid submission: {len(e.problems)} problem(s)",
-                          problems=[{"path": p.path, "message": p.message} for p in e.problems])
+                          problems=[{"path": p.path, "message": p.message.replace(root, "")} for p in e.problems])
         with rate_lock:  # re-check under the lock so concurrent uploads cannot overrun the limit
             if J.uploads_last_hour(engine, token["id"]) >= token["rate_per_hour"]:
                 shutil.rmtree(folder.parent, ignore_errors=True)

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import shutil
 import tempfile
-import time
 from pathlib import Path
 
 import pytest
@@ -80,7 +79,7 @@ def test_static_site_sorts(browser, scored, tmp_path):
     browser.save_screenshot(str(ARTIFACTS / "leaderboard_static.png"))
 
 
-def test_live_page_shows_a_newly_scored_method(browser, one_object, lb_root, tmp_path):
+def test_live_page_shows_a_newly_scored_method(browser, one_object, tmp_path):
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support.ui import WebDriverWait
 

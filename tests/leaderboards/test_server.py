@@ -99,6 +99,9 @@ def test_malformed_submission_lists_problems(server, gt_sub):
     assert body["error"].startswith("invalid submission")
     assert any("axis" in p["path"] and "zero" in p["message"] for p in body["problems"]), body
     assert all(str(server.work) not in p["message"] for p in body["problems"]), "server paths leaked"
+    bad_json = server.upload(server.tokens["main"], _zip_entries({"submission.json": b"{oops"}))
+    assert bad_json.status_code == 422 and "invalid JSON" in bad_json.json()["problems"][0]["message"]
+    assert str(server.work) not in bad_json.text
     r2 = server.upload(server.tokens["main"], _zip_entries({"x/readme.txt": b"hi"}))
     assert r2.status_code == 422 and "no submission.json" in r2.json()["error"]
 
