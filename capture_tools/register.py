@@ -95,11 +95,11 @@ def register_twin(mesh: trimesh.Trimesh, capture_points: np.ndarray, voxel: floa
     reg = o3d.pipelines.registration
     diag = float(np.linalg.norm(mesh.extents))
     voxel = voxel or diag / 40
-    pts, fidx = trimesh.sample.sample_surface(mesh, n_samples, seed=seed)
+    pts, normals = outer_surface_samples(mesh, n_samples, seed)
     # the twin is the target (exact normals from its faces); the capture is the source: every measured point
     # is pulled onto the twin, and twin surfaces the camera never saw (the bottom on the pedestal) pull nothing
     model = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(pts)))
-    model.normals = o3d.utility.Vector3dVector(np.asarray(mesh.face_normals)[fidx])
+    model.normals = o3d.utility.Vector3dVector(normals)
     scan = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(capture_points))
     model_d, scan_d = model.voxel_down_sample(voxel), scan.voxel_down_sample(voxel)
     if len(scan_d.points) < 30:
@@ -151,6 +151,30 @@ def register_twin(mesh: trimesh.Trimesh, capture_points: np.ndarray, voxel: floa
     inl = d < voxel / 2
     rmse = float(np.sqrt(np.mean(d[inl] ** 2))) if inl.any() else float("inf")
     return Registration(T, rmse, float(inl.mean()), float(coarse.fitness))
+
+
+def outer_surface_samples(mesh: trimesh.Trimesh, n: int, seed: int = 0, rays: int = 8) -> tuple[np.ndarray, np.ndarray]:
+    """(M, 3) points and normals on the *outer* surface of ``mesh`` (M <= n).
+
+    A twin's whole mesh is its parts side by side, so it has inner faces (a lid's underside on the body's
+    top) that no camera sees; ICP would pull the scan towards them. A sample is kept when at least one of
+    ``rays`` directions in its normal's hemisphere escapes the mesh without a hit.
+    """
+    rng = np.random.default_rng(seed)
+    pts, fidx = trimesh.sample.sample_surface(mesh, n, seed=seed)
+    nrm = np.asarray(mesh.face_normals)[fidx]
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor(np.asarray(mesh.vertices, np.float32)),
+                        o3d.core.Tensor(np.asarray(mesh.faces, np.uint32)))
+    eps = 1e-4 * float(np.linalg.norm(mesh.extents))
+    keep = np.zeros(len(pts), bool)
+    for k in range(rays):
+        d = nrm if k == 0 else nrm + rng.normal(size=nrm.shape) * 0.7
+        d = d * np.sign(np.sum(d * nrm, axis=1, keepdims=True))
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        r = np.concatenate([pts + eps * nrm, d], axis=1).astype(np.float32)
+        keep |= np.isinf(scene.cast_rays(o3d.core.Tensor(r))["t_hit"].numpy())
+    return np.asarray(pts)[keep], nrm[keep]
 
 
 def capture_residuals(mesh: trimesh.Trimesh, capture_points: np.ndarray, T: np.ndarray) -> np.ndarray:

@@ -22,7 +22,7 @@ from scipy.spatial.transform import Rotation
 
 from rsart.camera import Intrinsics
 
-from .sfm import SfmResult
+from .sfm import SfmResult, stable_depth
 
 
 @dataclass
@@ -64,6 +64,7 @@ def refine_rgbd(sfm: SfmResult, intrinsics: Intrinsics, depths: dict[str, np.nda
         d = depths.get(n)
         if d is None:
             continue
+        d = stable_depth(d)
         H, W = d.shape
         u = np.clip(np.round(uv[sel, 0]).astype(int), 0, W - 1)
         v = np.clip(np.round(uv[sel, 1]).astype(int), 0, H - 1)

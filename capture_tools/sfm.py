@@ -122,6 +122,20 @@ def _result(rec) -> SfmResult:
     return SfmResult(c2w, obs, pts, 1.0, float(rec.compute_mean_reprojection_error()))
 
 
+def stable_depth(depth: np.ndarray, rel: float = 0.015) -> np.ndarray:
+    """(H, W) depth with 0 wherever the 3x3 neighbourhood is incomplete or spans more than ``rel`` x z.
+
+    Keypoints sit on texture and silhouette edges; at a silhouette the sensor's depth may come from the
+    surface behind, which would bias the scale and the RGB-D adjustment.
+    """
+    d = depth.astype(np.float32)
+    k = np.ones((3, 3), np.uint8)
+    hi = cv2.dilate(d, k)
+    lo = cv2.erode(np.where(d > 0, d, np.float32(np.inf)), k)
+    ok = (d > 0) & np.isfinite(lo) & (hi - lo <= rel * d)
+    return np.where(ok, d, 0).astype(np.float32)
+
+
 def metric_scale(sfm: SfmResult, depths: dict[str, np.ndarray], min_points: int = 20) -> tuple[float, int]:
     """Metres per SfM unit: the median of measured / SfM depth over every observation with valid depth.
 
@@ -132,7 +146,7 @@ def metric_scale(sfm: SfmResult, depths: dict[str, np.ndarray], min_points: int 
     for name, ob in sfm.observations.items():
         if name not in depths or name not in sfm.c2w or not len(ob):
             continue
-        d = depths[name]
+        d = stable_depth(depths[name])
         u = np.round(ob[:, 0]).astype(int)
         v = np.round(ob[:, 1]).astype(int)
         ok = (u >= 0) & (v >= 0) & (u < d.shape[1]) & (v < d.shape[0])
