@@ -47,7 +47,27 @@ def build_object(root: Path, n_views: int = 12, states=("m0", "m1", "m2", "m3"))
     obj_dir = root / "cabinet-0000"
     meta = write_object(twin, obj_dir, object_id="cabinet-0000", category="storage",
                         source={"kind": "procedural", "id": "test"}, write_usd=False)
-    cams = cameras(n_views)
+    render_views(obj_dir, twin, meta, list(states), cameras(n_views))
+    write_index(DatasetIndex("disc-test", "1", ["cabinet-0000"], {"test": ["cabinet-0000"]}),
+                root / "index.json")
+    return obj_dir
+
+
+def ring_cameras(twin: Twin, n: int, size=(128, 96), focal: float = 100.0) -> list[Camera]:
+    """n cameras on a ring around the twin's rest bounds (elevations alternating 20 and 40 degrees)."""
+    lo, hi = twin.bounds(twin.zero_config())
+    c, r = (lo + hi) / 2, float(np.linalg.norm(hi - lo))
+    intr = Intrinsics(size[0], size[1], focal, focal, (size[0] - 1) / 2, (size[1] - 1) / 2, None)
+    out = []
+    for i in range(n):
+        az, el = 2 * np.pi * i / n, 0.35 + 0.35 * (i % 2)
+        out.append(Camera(intr, look_at(c + 1.3 * r * np.array([np.cos(az) * np.cos(el), np.sin(az) * np.cos(el),
+                                                                  np.sin(el)]), c)))
+    return out
+
+
+def render_views(obj_dir: Path, twin: Twin, meta, states: list[str], cams: list[Camera]) -> None:
+    """Ray-cast rgb (flat part colours, shaded), depth and part masks of ``states`` into obj_dir/states."""
     light = np.array([0.4, -0.3, 0.85]); light /= np.linalg.norm(light)
     for sid in states:
         posed = twin.posed_meshes(meta.state(sid).values)
@@ -60,16 +80,13 @@ def build_object(root: Path, n_views: int = 12, states=("m0", "m1", "m2", "m3"))
             shade = 0.55 + 0.45 * np.abs(hits.normal @ light)
             rgb = np.full(lab.shape + (3,), 0.1)
             fg = lab >= 0
-            rgb[fg] = COLORS[lab[fg]] * shade[fg, None]
+            rgb[fg] = COLORS[lab[fg] % len(COLORS)] * shade[fg, None]
             vid = f"{i:04d}"
             write_png_rgb(sdir / "rgb" / f"{vid}.png", (rgb * 255).round().astype(np.uint8))
             write_depth_png(sdir / "depth" / f"{vid}.png", hits.object_depth())
             write_mask_png(sdir / "mask" / f"{vid}.png", hits.part_mask())
             views.append(ViewRecord(vid, cam.c2w, "train"))
         write_cameras(CamerasFile(cams[0].intrinsics, 0.001, views), sdir / "cameras.json")
-    write_index(DatasetIndex("disc-test", "1", ["cabinet-0000"], {"test": ["cabinet-0000"]}),
-                root / "index.json")
-    return obj_dir
 
 
 def perfect_field(twin: Twin, meta, states: list[str], n: int = 2500, seed: int = 0, jitter: float = 0.0) -> tuple[StateField, np.ndarray]:
