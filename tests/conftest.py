@@ -20,13 +20,13 @@ def box(extents, center) -> trimesh.Trimesh:
 
 
 def make_cabinet() -> Twin:
-    """A 0.4 m cabinet body, a revolute lid hinged along its back top edge, and a prismatic drawer (+x)."""
+    """A 0.4 m cabinet body, a lid hinged along its back top edge (opens upward for positive values), a drawer (+x)."""
     base = box([0.4, 0.4, 0.3], [0, 0, 0.15])
     lid = box([0.4, 0.4, 0.02], [0, 0, 0.312])
     drawer = box([0.3, 0.3, 0.1], [0.06, 0, 0.1])
     parts = [TwinPart(0, "base", base), TwinPart(1, "lid", lid), TwinPart(2, "drawer", drawer)]
     joints = [
-        Joint("lid_hinge", "revolute", 0, 1, np.array([0.0, 1.0, 0.0]), np.array([-0.2, 0.0, 0.302]), (0.0, math.pi / 2)),
+        Joint("lid_hinge", "revolute", 0, 1, np.array([0.0, -1.0, 0.0]), np.array([-0.2, 0.0, 0.302]), (0.0, math.pi / 2)),
         Joint("drawer_slide", "prismatic", 0, 2, np.array([1.0, 0.0, 0.0]), np.array([0.2, 0.0, 0.1]), (0.0, 0.25)),
     ]
     return Twin("cabinet", parts, joints)

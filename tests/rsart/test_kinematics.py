@@ -35,9 +35,9 @@ def test_prismatic_moves_along_axis():
 def test_cabinet_lid_and_drawer_poses():
     t = make_cabinet()
     T = t.pose({"lid_hinge": math.pi / 2, "drawer_slide": 0.2})
-    # lid front edge (0.2, 0, 0.302) rotates about y through (-0.2, 0, 0.302) by +90 deg:
-    # r = (0.4, 0, 0) -> R_y(90) r = (0, 0, -0.4)
-    np.testing.assert_allclose(apply(T[1], [0.2, 0, 0.302]), [-0.2, 0, -0.098], atol=1e-12)
+    # lid front edge (0.2, 0, 0.302) rotates about -y through (-0.2, 0, 0.302) by +90 deg:
+    # r = (0.4, 0, 0) -> R_-y(90) r = R_y(-90) r = (0, 0, 0.4): the lid stands up
+    np.testing.assert_allclose(apply(T[1], [0.2, 0, 0.302]), [-0.2, 0, 0.702], atol=1e-12)
     np.testing.assert_allclose(apply(T[2], [0, 0, 0]), [0.2, 0, 0], atol=1e-15)
     np.testing.assert_allclose(T[0], np.eye(4))
 
