@@ -200,6 +200,13 @@ def create_app(cfg: ServerConfig) -> FastAPI:
 
         return metrics_page()
 
+    @app.get("/methods.html", response_class=HTMLResponse)
+    @app.get("/downloads.html", response_class=HTMLResponse)
+    def static_only():
+        return page("Static site only", "<p>Method pages, plots and the Markdown/CSV exports are part of the static "
+                    "site: <code>rsart leaderboard build --db URL --out site/</code>. The JSON rows are at "
+                    '<a href="api/leaderboard">api/leaderboard</a>.</p>')
+
     @app.get("/healthz")
     def healthz():
         return {"ok": True}
