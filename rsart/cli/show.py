@@ -18,6 +18,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--states", default=None, help="comma-separated state ids (default: all)")
     p.add_argument("--out", type=Path, required=True, help="output PNG")
     p.add_argument("--dpi", type=int, default=90)
+    p.add_argument("--views", action="store_true",
+                   help="draw the rendered views instead (per captured state: RGB | depth colour-mapped | mask, "
+                        "joint axes projected); needs states rendered with `rsart render`")
     p.set_defaults(func=_show)
 
 
@@ -34,6 +37,13 @@ def _show(args) -> int:
     else:
         target = args.object
     states = [s for s in args.states.split(",") if s] if args.states else None
+    if args.views:
+        if args.object is None:
+            raise RsartError("--views needs an OBJECT folder with rendered states")
+        from ..render.contact_sheet import render_sheet
+
+        print(render_sheet(args.object, args.out))
+        return 0
     out = show_twin(target, args.out, states=states, dpi=args.dpi)
     print(out)
     return 0
