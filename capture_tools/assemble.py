@@ -105,6 +105,10 @@ def assemble(raw_dir: str | Path, twin_path: str | Path, states_yaml: str | Path
     object_id = str(log.get("object_id") or twin.name)
     multi = [s.id for s in states if s.kind == "multi"] or [s.id for s in states]
     eval_states = log.get("eval_states") or {"start": multi[0], "end": multi[-1]}
+    known = {s.id for s in states}
+    if not isinstance(eval_states, dict) or set(eval_states) != {"start", "end"} or not set(eval_states.values()) <= known:
+        raise RsartError(f"capture log eval_states {eval_states!r}: needs 'start' and 'end' naming logged states "
+                         f"({sorted(known)})")
     out = Path(out)
     if out.exists() and not overwrite:
         raise RsartError(f"{out}: already exists (pass --overwrite to replace it)")

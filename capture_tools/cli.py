@@ -45,6 +45,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--layout", choices=("frames", "video", "bag"), default="frames")
     r.add_argument("--out", type=Path, required=True)
     r.add_argument("--states", nargs="*", default=None, help="state ids (default: every rendered state)")
+    r.add_argument("--codec", choices=("FFV1", "MJPG"), default="FFV1",
+                   help="video layout: FFV1 lossless (color.mkv, default) or MJPG lossy (color.avi)")
     r.set_defaults(func=_raw)
 
     i = csub.add_parser("info", help="intrinsics, depth scale and frame count of a recording")
@@ -74,7 +76,7 @@ def _assemble(args) -> int:
 def _raw(args) -> int:
     from .raw_writer import write_raw_capture
 
-    path = write_raw_capture(args.object, args.out, args.layout, args.states)
+    path = write_raw_capture(args.object, args.out, args.layout, args.states, codec=args.codec)
     print(f"wrote {args.out} ({args.layout}); capture log {path}")
     return 0
 

@@ -20,6 +20,7 @@ from rsart.io import atomic_write_text, read_depth_png, read_png_rgb
 from .readers import StreamCalibration, write_calibration
 
 LAYOUTS = ("frames", "video", "bag")
+VIDEO_CODECS = {"FFV1": "color.mkv", "MJPG": "color.avi"}
 
 
 def _depth_units(path: Path, scale: float) -> np.ndarray:
@@ -27,8 +28,13 @@ def _depth_units(path: Path, scale: float) -> np.ndarray:
 
 
 def write_raw_capture(object_dir: str | Path, raw_dir: str | Path, layout: str = "frames",
-                      states: list[str] | None = None, fps: float = 30.0) -> Path:
-    """Write the rendered ``states`` (default: all captured) of ``object_dir`` to ``raw_dir``; returns states.yaml."""
+                      states: list[str] | None = None, fps: float = 30.0, codec: str = "FFV1") -> Path:
+    """Write the rendered ``states`` (default: all captured) of ``object_dir`` to ``raw_dir``; returns states.yaml.
+
+    ``codec`` (video layout): "FFV1" (lossless, ``color.mkv``) or "MJPG" (lossy, ``color.avi``).
+    """
+    if codec not in VIDEO_CODECS:
+        raise RsartError(f"video codec {codec!r} is not one of {sorted(VIDEO_CODECS)}")
     if layout not in LAYOUTS:
         raise RsartError(f"layout {layout!r} is not one of {LAYOUTS}")
     obj, raw = Path(object_dir), Path(raw_dir)
@@ -60,10 +66,10 @@ def write_raw_capture(object_dir: str | Path, raw_dir: str | Path, layout: str =
                 (out / "color").mkdir(exist_ok=True)
             else:
                 K = cams.intrinsics
-                writer = cv2.VideoWriter(str(out / "color.avi"), cv2.VideoWriter_fourcc(*"MJPG"), fps,
-                                         (K.width, K.height))
+                vpath = out / VIDEO_CODECS[codec]
+                writer = cv2.VideoWriter(str(vpath), cv2.VideoWriter_fourcc(*codec), fps, (K.width, K.height))
                 if not writer.isOpened():
-                    raise RsartError(f"{out / 'color.avi'}: OpenCV cannot write MJPG video here")
+                    raise RsartError(f"{vpath}: OpenCV cannot write {codec} video here")
             lines = ["name,timestamp_ms"]
             for i, v in enumerate(views):
                 rgb = read_png_rgb(sdir / "rgb" / f"{v}.png")[..., :3]
@@ -81,6 +87,8 @@ def write_raw_capture(object_dir: str | Path, raw_dir: str | Path, layout: str =
         if st.kind == "single":
             entry.update(joint=st.joint, extreme=st.extreme)
         log["states"].append(entry)
+    if not set(log["eval_states"].values()) <= set(ids):
+        del log["eval_states"]  # a subset of the states: the assembler picks the first and last multi state
     path = raw / "states.yaml"
     atomic_write_text(path, yaml.safe_dump(log, sort_keys=False))
     return path

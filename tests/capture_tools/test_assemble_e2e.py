@@ -90,7 +90,7 @@ def test_video_layout_via_cli(sim_capture, tmp_path, capture_plugin, capsys):
 
     raw = tmp_path / "raw"
     assert main(["capture", "raw", str(sim_capture), "--layout", "video", "--out", str(raw), "--states", "m3"]) == 0
-    assert (raw / "m3" / "color.avi").is_file()
+    assert (raw / "m3" / "color.mkv").is_file()  # FFV1, lossless (docs/capture.md has the MJPG figures)
     out = tmp_path / "obj"
     code = main(["capture", "assemble", str(raw), "--twin", str(sim_capture / "twin" / "object.urdf"),
                  "--out", str(out), "--views", "24"])
