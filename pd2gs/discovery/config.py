@@ -79,6 +79,7 @@ class DiscoveryConfig:
     finetune: bool = True            # fine-tune children's rotation + opacity (needs the rasterizer)
     finetune_iters: int = 200
     finetune_lr: float = 0.01
+    background: tuple[float, float, float] | None = None  # the trainer's render background (None = black)
 
     # --- kinematics (paper App. A.3, A.4)
     joint_rule: str = "paper"

@@ -24,8 +24,11 @@ def _quat_mul(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
 
 
 def finetune_children(fld: StateField, children: np.ndarray, views: list[list[tuple[Camera, np.ndarray]]],
-                      iters: int = 200, lr: float = 0.01, seed: int = 0, backend: str = "cpu") -> dict:
+                      iters: int = 200, lr: float = 0.01, seed: int = 0, backend: str = "cpu",
+                      background: tuple[float, float, float] | None = None) -> dict:
     """Optimise children's rotations and opacities in place; views[k] = [(camera, rgb uint8 (H,W,3))] of state k.
+
+    ``background``: RGB in [0, 1] composited behind the Gaussians (the trainer's; None = black).
 
     -> {"loss_first", "loss_last"} (mean L1 over the first / last 10 iterations).
     """
@@ -42,6 +45,7 @@ def finetune_children(fld: StateField, children: np.ndarray, views: list[list[tu
     op0 = np.clip(fld.opacities[children], 1e-4, 1 - 1e-4)
     logit = torch.tensor(np.log(op0 / (1 - op0)), dtype=torch.float32, requires_grad=True)
     optim = torch.optim.Adam([r, logit], lr=lr)
+    bg = None if background is None else torch.tensor(background, dtype=torch.float32)
     pairs = [(k, i) for k in range(len(views)) for i in range(len(views[k]))]
     losses = []
     for _ in range(iters):
@@ -51,7 +55,7 @@ def finetune_children(fld: StateField, children: np.ndarray, views: list[list[tu
         q = q.index_put((ch,), _quat_mul(q[ch], r / r.norm(dim=-1, keepdim=True)))
         o = f32(fld.opacities).clone().index_put((ch,), torch.sigmoid(logit))
         out = rasterize(f32(fld.means[k]), q, f32(fld.scales[k]), f32(fld.colors), o, f32(cam.K), f32(cam.w2c),
-                        cam.width, cam.height, backend=backend)
+                        cam.width, cam.height, background=bg, backend=backend)
         loss = (out.rgb - f32(rgb) / 255.0).abs().mean()
         optim.zero_grad()
         loss.backward()

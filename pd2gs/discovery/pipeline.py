@@ -141,7 +141,7 @@ def refine_parts(fld: StateField, labels: np.ndarray, obj, states: list[str], re
                                                                            min(cfg.max_image_side, 160))]
               for s in sr.field.state_ids]
         diag["finetune"] = finetune_children(sr.field, sr.children, tv, cfg.finetune_iters, cfg.finetune_lr,
-                                             cfg.seed, cfg.render_backend)
+                                             cfg.seed, cfg.render_backend, cfg.background)
     return sr.field, sr.labels, diag
 
 
