@@ -36,6 +36,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     a.add_argument("--out", type=Path, required=True, help="object folder to write")
     a.add_argument("--views", type=int, default=30, help="frames selected per state (default 30)")
     a.add_argument("--no-grabcut", action="store_true", help="chroma key without the GrabCut edge refinement")
+    a.add_argument("--charuco", default=None, metavar="SXxSY,SQUARE,MARKER[,DICT]",
+                   help="a ChArUco board on the pedestal gives the metric scale, e.g. 5x7,0.04,0.03,DICT_5X5_100 "
+                        "(squares, square and marker side in metres)")
     a.add_argument("--seed", type=int, default=0)
     a.add_argument("--overwrite", action="store_true")
     a.set_defaults(func=_assemble)
@@ -63,7 +66,8 @@ def _assemble(args) -> int:
 
     if args.views < 3:
         raise RsartError(f"--views must be at least 3, got {args.views}")
-    s = CaptureSettings(n_views=args.views, chroma=ChromaSettings(grabcut=not args.no_grabcut), seed=args.seed)
+    s = CaptureSettings(n_views=args.views, chroma=ChromaSettings(grabcut=not args.no_grabcut), seed=args.seed,
+                        board=_board(args.charuco) if args.charuco else None)
     rep = assemble(args.raw, args.twin, args.states, args.out, s, overwrite=args.overwrite)
     bad = [sid for sid, r in rep["states"].items() if r["registration"]["icp_fitness"] < 0.7]
     print(f"wrote {args.out}")
@@ -71,6 +75,23 @@ def _assemble(args) -> int:
         print(f"warning: twin registration fits poorly in states {bad} (fitness < 0.7); see {args.out}/capture.json")
         return 1
     return 0
+
+
+def _board(text: str):
+    from rsart.errors import RsartError
+
+    from .board import BoardSpec
+
+    try:
+        parts = text.split(",")
+        sx, sy = (int(x) for x in parts[0].lower().split("x"))
+        spec = BoardSpec(sx, sy, float(parts[1]), float(parts[2]), parts[3] if len(parts) > 3 else "DICT_5X5_100")
+    except (ValueError, IndexError):
+        raise RsartError(f"--charuco {text!r}: expected SXxSY,SQUARE,MARKER[,DICT], e.g. 5x7,0.04,0.03") from None
+    if not (spec.squares_x > 1 and spec.squares_y > 1 and 0 < spec.marker < spec.square):
+        raise RsartError(f"--charuco {text!r}: needs > 1 squares each way and 0 < marker < square")
+    spec.board()  # unknown dictionary -> RsartError
+    return spec
 
 
 def _raw(args) -> int:

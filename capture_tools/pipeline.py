@@ -26,6 +26,7 @@ from rsart.errors import RsartError
 from rsart.kinematics import Twin
 
 from . import chroma
+from .board import BoardSpec, board_pose, board_scale
 from .depth_align import refine_with_depth, view_points
 from .readers import RawFrame, Recording
 from .register import Registration, pedestal_plane, register_twin, up_alignment
@@ -47,6 +48,7 @@ class CaptureSettings:
     depth_icp: bool = True
     icp_voxel: float = 0.004
     seed: int = 0
+    board: BoardSpec | None = None
 
 
 @dataclass
@@ -84,8 +86,16 @@ def process_state(rec: Recording, twin: Twin, values: dict[str, float],
     sfm = run_sfm({names[f.name]: f.rgb for f in frames}, K, feat_masks, seed=settings.seed)
     depths = {names[f.name]: f.depth for f in frames}
     scale, n_ratios = metric_scale(sfm, depths)
+    extra: dict = {"depth_scale_factor": scale}
+    if settings.board is not None:
+        seen = {names[f.name]: p for f in frames if (p := board_pose(f.rgb, K, settings.board)) is not None}
+        if len(seen) >= 3:
+            scale, _ = board_scale(sfm.c2w, seen)  # the board's metric scale replaces the depth sensor's
+            extra.update(board_views=len(seen), board_scale_factor=scale)
+        else:
+            extra.update(board_views=len(seen), board_note="board seen in < 3 views: depth scale kept")
     sfm = apply_scale(sfm, scale)
-    report: dict = {"frames_total": len(scores), "frames_selected": len(frames),
+    report: dict = {**extra, "frames_total": len(scores), "frames_selected": len(frames),
                     "sfm_registered": len(sfm.c2w), "sfm_reprojection_px": sfm.mean_reprojection_error,
                     "metric_scale_ratios": n_ratios}
     if settings.rgbd_ba:
