@@ -6,6 +6,8 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.rsart-installed
 APT_PKGS := libusb-1.0-0 libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1 libosmesa6
+# Headless browser for the leaderboard site tests (Debian's; no browser is downloaded at run time).
+TEST_APT_PKGS := chromium chromium-driver
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 # Headless GL for pyrender and MuJoCo (same platform for both); rsart falls back to osmesa.
 export PYOPENGL_PLATFORM ?= egl
@@ -13,12 +15,18 @@ export MUJOCO_GL ?= $(PYOPENGL_PLATFORM)
 DEMO_OUT ?= demo_out
 PYTEST_ARGS ?=
 
-.PHONY: setup sysdeps demo test bench clean
+.PHONY: setup sysdeps testdeps aptinstall demo test bench clean
 
 setup: sysdeps $(STAMP)
 
 sysdeps:
-	@missing=""; for p in $(APT_PKGS); do dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; \
+	@$(MAKE) --no-print-directory aptinstall PKGS="$(APT_PKGS)"
+
+testdeps:
+	@$(MAKE) --no-print-directory aptinstall PKGS="$(TEST_APT_PKGS)"
+
+aptinstall:
+	@missing=""; for p in $(PKGS); do dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; \
 	if [ -n "$$missing" ]; then echo "installing system libraries:$$missing"; \
 	  $(SUDO) apt-get update -q && DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -q $$missing; fi
 
@@ -31,7 +39,7 @@ $(STAMP): pyproject.toml requirements.lock
 demo: setup
 	$(PY) -m rsart.demo --out $(DEMO_OUT)
 
-test: setup
+test: setup testdeps
 	$(PY) -m pytest -q $(PYTEST_ARGS)
 
 bench: setup
