@@ -49,6 +49,7 @@ class CaptureSettings:
     icp_voxel: float = 0.004
     seed: int = 0
     board: BoardSpec | None = None
+    max_ba_reproj_px: float = 1.5
 
 
 @dataclass
@@ -99,8 +100,12 @@ def process_state(rec: Recording, twin: Twin, values: dict[str, float],
                     "sfm_registered": len(sfm.c2w), "sfm_reprojection_px": sfm.mean_reprojection_error,
                     "metric_scale_ratios": n_ratios}
     if settings.rgbd_ba:
-        sfm, ba = refine_rgbd(sfm, K, depths)
-        report["rgbd_ba"] = {"median_reproj_px": ba.median_reproj_px, "median_depth_residual_m": ba.median_depth_residual}
+        refined, ba = refine_rgbd(sfm, K, depths)
+        kept = ba.median_reproj_px <= settings.max_ba_reproj_px  # a diverged adjustment must not replace SfM
+        report["rgbd_ba"] = {"median_reproj_px": ba.median_reproj_px, "median_depth_residual_m": ba.median_depth_residual,
+                             "used": bool(kept)}
+        if kept:
+            sfm = refined
     c2w = dict(sfm.c2w)
     obj_masks = {names[f.name]: masks[f.name] for f in frames}
     if settings.depth_icp:
