@@ -5,6 +5,7 @@ that fails anywhere becomes ``null`` in the submission with its reason logged, n
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
 from dataclasses import asdict
@@ -25,9 +26,10 @@ class TrainedModel:
     lerp(α_a, α_b, t).
     """
 
-    def __init__(self, field, state_ids: list[str]):
+    def __init__(self, field, state_ids: list[str], background: tuple[float, float, float] | None = None):
         self.field = field
         self.state_ids = list(state_ids)
+        self.background = background  # the trainer's render background (RGB in [0, 1])
 
     def _gaussians(self, latent: torch.Tensor) -> dict:
         with torch.no_grad():
@@ -51,7 +53,7 @@ def train_object(obj_dir: Path, run_dir: Path, cfg, progress: bool = True) -> Tr
     done = run_dir / "metrics.json"
     if done.is_file() and (run_dir / "checkpoint.pt").is_file():
         tcfg, field = load_field(run_dir)
-        return TrainedModel(field, tcfg.states)
+        return TrainedModel(field, tcfg.states, tcfg.background)
     cfg.object_dir = str(obj_dir)
     cfg.states, frames = load_frames(obj_dir, cfg.states or None, cfg.size, with_depth=cfg.depth_init)
     trainer = Trainer(cfg, frames, run_dir)
@@ -64,7 +66,7 @@ def train_object(obj_dir: Path, run_dir: Path, cfg, progress: bool = True) -> Tr
     write_json_atomic(done, {"test_psnr": trainer.evaluate("test"), "train_psnr": trainer.evaluate("train"),
                              "iterations": trainer.iteration, "seconds": time.perf_counter() - t0,
                              "gaussians": trainer.field.gaussians.num})
-    return TrainedModel(trainer.field, cfg.states)
+    return TrainedModel(trainer.field, cfg.states, cfg.background)
 
 
 def run(data: str | Path, out: str | Path, objects: list[str] | None = None, split: str | None = None,
@@ -98,11 +100,14 @@ def run(data: str | Path, out: str | Path, objects: list[str] | None = None, spl
         cfg = TrainConfig.from_json(asdict(train_cfg)) if train_cfg is not None else TrainConfig()
         try:
             model = train_object(obj.path, out / "runs" / obj.id, cfg, progress=progress)
-            results[obj.id] = discover_safe(model, obj, dcfg)
+            ocfg = dcfg if dcfg.background is not None else dataclasses.replace(dcfg, background=model.background)
+            results[obj.id] = discover_safe(model, obj, ocfg)
         except Exception as e:  # a failed object is a null entry, never a crash
             log.error("%s: %s: %s", obj.id, type(e).__name__, e)
             results[obj.id] = e if isinstance(e, ObjectFailure) else ObjectFailure(f"{type(e).__name__}: {e}")
         status = "failed: " + str(results[obj.id]) if isinstance(results[obj.id], BaseException) else "ok"
         print(f"[pd2gs] {obj.id}: {status} ({time.perf_counter() - t0:.0f} s)", flush=True)
-    return write_submission(results, out / "submission", method_block(dcfg), dataset_block(str(data)),
+    n_states = dcfg.n_states or len(train_cfg.states if train_cfg is not None and train_cfg.states else
+                                    [s for s in objs[0].meta.states if s.kind == "multi"])
+    return write_submission(results, out / "submission", method_block(dcfg, n_states), dataset_block(str(data)),
                             overwrite=True)
