@@ -19,6 +19,7 @@ import statistics
 import time
 from pathlib import Path
 
+import pd2gs  # noqa: F401  (sets OMP_WAIT_POLICY before torch loads)
 import torch
 
 from pd2gs.render import rasterize
@@ -87,6 +88,12 @@ def main() -> None:
                 print(f"{opacity:5s} {size}x{size} N={n:6d}  cpu {row['cpu']['it_per_s']:6.1f} it/s  "
                       f"reference {row['reference']['it_per_s']:6.2f} it/s  "
                       f"ratio {row['speedup_cpu_vs_reference']:.1f}x", flush=True)
+                _write(args, rows)  # partial results survive an interrupted run
+    _write(args, rows)
+    print("wrote", args.out)
+
+
+def _write(args, rows) -> None:
     result = {
         "benchmark": "pd2gs_raster", "what": "rasterize + L1 + backward, float32, 2 threads",
         "machine": {"cpus": os.cpu_count(), "processor": platform.processor(),
@@ -98,7 +105,6 @@ def main() -> None:
     tmp = Path(args.out).with_suffix(".tmp")
     tmp.write_text(json.dumps(result, indent=2))
     tmp.replace(args.out)
-    print("wrote", args.out)
 
 
 if __name__ == "__main__":
