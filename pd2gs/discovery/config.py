@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
 
-COUNTERS = ("motion", "vlm", "given")
+COUNTERS = ("trajectory", "motion", "vlm", "given")
 MASK_PROVIDERS = ("grabcut", "sam", "oracle")
 JOINT_RULES = ("paper", "bic")
 
@@ -51,7 +51,9 @@ class DiscoveryConfig:
                                       # always move together, e.g. equal drawers in multi-part states)
 
     # --- how many parts
-    counter: str = "motion"
+    counter: str = "trajectory"  # trajectory: local rigid motions + silhouette (default); motion: rigid RANSAC
+    count_min_opacity: float = 0.3   # ours: only Gaussians at least this opaque vote on the part count
+    min_silhouette: float = 0.35     # ours: below it, one movable part (chosen on two trained demo fields, see docs)
     given_count: int | None = None   # for counter="given" (pipeline fills it from meta.json)
     max_parts: int = 8
     ransac_thresh_rel: float = 0.05  # ours: inlier distance as a fraction of the largest displacement

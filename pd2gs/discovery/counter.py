@@ -93,6 +93,59 @@ def count_rigid_motions(means_dyn: np.ndarray, thresh: float, min_frac: float = 
     return MotionCount(len(support), support, labels)
 
 
+def local_rigid_motions(means: np.ndarray, neighbours: int = 16, sample: int = 1500, seed: int = 0) -> np.ndarray:
+    """(M, 6) per-Gaussian rigid motion first -> last state, fitted (Kabsch) on each sampled Gaussian's
+    ``neighbours`` nearest neighbours in the first state: [rotation vector (rad), translation / extent].
+
+    A rigid part has one (R, t) for all its points, so these features form one tight cluster per part
+    (unlike raw trajectories, whose directions vary across a rotating part). ``means``: (K, N, 3).
+    """
+    from scipy.spatial.transform import Rotation
+
+    K, n, _ = means.shape
+    rng = np.random.default_rng(seed)
+    idx = np.arange(n) if n <= sample else rng.choice(n, sample, replace=False)
+    P, Q = means[0], means[-1]
+    extent = float(np.linalg.norm(np.ptp(P, axis=0))) + 1e-12
+    _, nb = cKDTree(P).query(P[idx], k=min(neighbours, n))
+    feats = np.empty((len(idx), 6))
+    resid = np.empty(len(idx))
+    for r, ns in enumerate(np.atleast_2d(nb)):
+        R, t = kabsch(P[ns], Q[ns])
+        feats[r, :3] = Rotation.from_matrix(R).as_rotvec()
+        feats[r, 3:] = t / extent
+        resid[r] = np.sqrt(np.mean(np.sum((P[ns] @ R.T + t - Q[ns]) ** 2, axis=1)))
+    # neighbourhoods straddling two parts fit no rigid motion well: drop them (they would form a
+    # spurious "in-between" cluster)
+    keep = resid <= 2.0 * np.median(resid) + 1e-9
+    return feats[keep]
+
+
+def count_by_trajectories(features: np.ndarray, max_parts: int = 8, min_silhouette: float = 0.35,
+                          seed: int = 0) -> tuple[int, dict]:
+    """Number of distinct rigid motions by model selection over k (ours; the default counter).
+
+    k-means (k-means++) on per-Gaussian local rigid motions (:func:`local_rigid_motions`) for
+    k = 2..max_parts; the k with the best silhouette wins if it reaches ``min_silhouette``, else 1.
+    Robust to trained fields whose per-part motion is not exactly rigid, where the sequential-RANSAC
+    counter finds nothing or over-splits. Returns (n, {"silhouettes": {k: s}}).
+    """
+    from sklearn.cluster import KMeans
+    from sklearn.metrics import silhouette_score
+
+    n = len(features)
+    if n < 10:
+        return (1 if n else 0), {"silhouettes": {}}
+    scores = {}
+    for k in range(2, min(max_parts, n - 1) + 1):
+        lab = KMeans(k, n_init=4, random_state=seed).fit_predict(features)
+        if len(np.unique(lab)) < 2:
+            continue
+        scores[k] = float(silhouette_score(features, lab, random_state=seed))
+    best = max(scores, key=scores.get) if scores else 1
+    return (best if scores and scores[best] >= min_silhouette else 1), {"silhouettes": scores}
+
+
 # ----------------------------------------------------------------------------- VLM counter
 def parse_count(text: str) -> int | None:
     """The N of "Number of moved components: [N]" (brackets optional, case-insensitive), else None."""

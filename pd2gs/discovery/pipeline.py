@@ -24,7 +24,7 @@ from rsart.camera import Camera
 
 from . import motion
 from .config import DiscoveryConfig
-from .counter import CountError, count_rigid_motions, sample_image_pairs, vlm_count
+from .counter import CountError, count_by_trajectories, count_rigid_motions, local_rigid_motions, sample_image_pairs, vlm_count
 from .field import StateField, as_state_field
 from .kinematics import estimate_joint
 from .masks import make_provider, sample_prompts, visibility_sets
@@ -91,6 +91,15 @@ def count_parts(fld: StateField, dyn: np.ndarray, obj, states: list[str], cfg: D
         pairs = sample_image_pairs(obj, states, cfg.vlm.n_pairs, cfg.vlm.seed)
         n, answers = vlm_count(pairs, cfg.vlm.url, cfg.vlm.model, cfg.vlm.api_key_env, cfg.vlm.timeout_s)
         return n, {"counter": "vlm", "answers": answers}
+    if cfg.counter == "trajectory":
+        sel = dyn & (np.asarray(fld.opacities).reshape(-1) >= cfg.count_min_opacity)
+        if sel.sum() < 10:
+            sel = dyn
+        if sel.sum() == 0:
+            return 0, {"counter": "trajectory", "n_voters": 0}
+        n, diag = count_by_trajectories(local_rigid_motions(fld.means[:, sel], seed=cfg.seed), cfg.max_parts,
+                                        cfg.min_silhouette, cfg.seed)
+        return n, {"counter": "trajectory", "n_voters": int(sel.sum()), **diag}
     md = fld.means[:, dyn]
     if md.shape[1] < 3:
         return 0, {"counter": "motion", "support": []}
