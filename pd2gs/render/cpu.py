@@ -1,6 +1,7 @@
 """The ``cpu`` backend: Numba kernels wrapped in one autograd node."""
 from __future__ import annotations
 
+import numba
 import numpy as np
 import torch
 
@@ -45,9 +46,10 @@ class _CpuComposite(torch.autograd.Function):
         else:
             lab, lw = np.zeros(1, np.int64), np.zeros((1, 1, 0), dt)
         maxw_pair = np.zeros(gids.shape[0] if want_max else 0, dt)
+        order = kern.tile_order(offsets, numba.get_num_threads())
         out, trans, last = kern.forward_kernel(offsets, gids, *arrays, width, height,
-                                               tiles_x, consts, lab, lw, maxw_pair)
-        ctx.state = (offsets, gids, arrays, width, height, tiles_x, consts, trans, last)
+                                               tiles_x, consts, lab, lw, maxw_pair, order)
+        ctx.state = (offsets, gids, arrays, width, height, tiles_x, consts, trans, last, order)
         n = means2d.shape[0]
         maxw = torch.from_numpy(kern.reduce_max(gids, maxw_pair, n)) if want_max else None
         lw_t = torch.from_numpy(lw) if labels is not None else None
@@ -58,7 +60,7 @@ class _CpuComposite(torch.autograd.Function):
 
     @staticmethod
     def backward(ctx, g_feat, g_trans, _g_lw, _g_max):
-        offsets, gids, arrays, width, height, tiles_x, consts, trans, last = ctx.state
+        offsets, gids, arrays, width, height, tiles_x, consts, trans, last, order = ctx.state
         dt = arrays[0].dtype
         gf = (g_feat if g_feat is not None else torch.zeros(height, width, 4)).to(
             torch.from_numpy(arrays[0]).dtype).contiguous().numpy()
@@ -66,7 +68,7 @@ class _CpuComposite(torch.autograd.Function):
             torch.from_numpy(arrays[0]).dtype).contiguous().numpy()
         pair = kern.backward_kernel(offsets, gids, *arrays, width, height, tiles_x,
                                     consts, trans, last, gf.astype(dt, copy=False),
-                                    gt.astype(dt, copy=False))
+                                    gt.astype(dt, copy=False), order)
         g = torch.from_numpy(kern.reduce_pairs(gids, pair, arrays[0].shape[0]))
         return g[:, 0:2], g[:, 2:5], g[:, 5], g[:, 6:10], None, None, None, None, None, None, None
 

@@ -138,15 +138,17 @@ def _sum(buf):
     return acc
 
 
-@njit(cache=True)
-def _tile_order(offsets):
-    """Tiles sorted by decreasing list length (largest first balances the threads)."""
-    return np.argsort(-(offsets[1:] - offsets[:-1]), kind="mergesort")
+def tile_order(offsets: np.ndarray, threads: int) -> np.ndarray:
+    """Tiles sorted by decreasing list length, dealt round-robin to the threads: prange splits
+    its range into one contiguous block per thread, so block j holds ranks j, j + T, j + 2T...
+    and every thread gets a similar share of heavy and light tiles. (T+0,) int64."""
+    ranked = np.argsort(-(offsets[1:] - offsets[:-1]), kind="stable")
+    return np.concatenate([ranked[j::max(threads, 1)] for j in range(max(threads, 1))])
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
 def forward_kernel(offsets, gids, means2d, conics, opac, feat, width, height, tiles_x,
-                   c, labels, lw_out, maxw_pair):
+                   c, labels, lw_out, maxw_pair, order):
     """Front-to-back compositing of each 16x16 tile, Gaussians outer, the 256 pixels inner.
 
     c: constants from ``make_consts``. labels: (N,) int64 (used when lw_out has L > 0
@@ -163,7 +165,6 @@ def forward_kernel(offsets, gids, means2d, conics, opac, feat, width, height, ti
     want_max = maxw_pair.shape[0] > 0
     amax, amin, tmin, half = c[C_AMAX], c[C_AMIN], c[C_TMIN], c[C_HALF]
     ec = _exp_consts(c)
-    order = _tile_order(offsets)
     npx = TILE * TILE
     for i in prange(order.shape[0]):
         t = order[i]
@@ -235,7 +236,7 @@ def forward_kernel(offsets, gids, means2d, conics, opac, feat, width, height, ti
 
 @njit(parallel=True, cache=True, error_model="numpy", fastmath={"reassoc", "nsz"})
 def backward_kernel(offsets, gids, means2d, conics, opac, feat, width, height, tiles_x,
-                    c, trans, last, g_feat, g_trans):
+                    c, trans, last, g_feat, g_trans, order):
     """Exact gradients of ``forward_kernel``: each pixel walks its list back to front
     (transmittance recovered by division, as in 3DGS), Gaussians outer, pixels inner.
 
@@ -247,7 +248,6 @@ def backward_kernel(offsets, gids, means2d, conics, opac, feat, width, height, t
     amax, amin = c[C_AMAX], c[C_AMIN]
     ec = _exp_consts(c)
     pair_grad = np.zeros((gids.shape[0], 10), dt)
-    order = _tile_order(offsets)
     npx = TILE * TILE
     for i in prange(order.shape[0]):
         t = order[i]
