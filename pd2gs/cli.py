@@ -55,6 +55,23 @@ def _parser() -> argparse.ArgumentParser:
     e.add_argument("--object", required=True, help="RS-Art object folder holding the unseen states")
     e.add_argument("--unseen", required=True, help="comma-separated unseen state ids")
     e.add_argument("--backend", default="cpu", choices=["cpu", "reference", "gsplat"])
+    u = sub.add_parser("run", help="end to end: train -> parts -> joints -> meshes -> rsart-submission/1",
+                       description="Run PD²GS on every object of a dataset (or one object folder) and write "
+                                   "OUT/submission/submission.json for rsart-eval; training runs go to OUT/runs/. "
+                                   "An object that fails is written as null with its reason in failures.json.")
+    u.add_argument("--data", required=True, help="dataset root (index.json) or one rendered object folder")
+    u.add_argument("--objects", default=None, help="comma-separated object ids (default: all, or --split)")
+    u.add_argument("--split", default=None, help="a split of index.json")
+    u.add_argument("--out", required=True, help="output folder")
+    u.add_argument("--iters", type=int, default=None, help="training iterations (default 3000)")
+    u.add_argument("--size", default="160x120", help="training image size WxH")
+    u.add_argument("--counter", default=None, choices=["trajectory", "motion", "vlm", "given"],
+                   help="part counter (default trajectory)")
+    u.add_argument("--joint-rule", default=None, choices=["bic", "paper"], help="joint-type rule (default bic)")
+    u.add_argument("--no-refine", action="store_true", help="ablation: skip boundary-aware refinement")
+    u.add_argument("--mask-provider", default=None, choices=["grabcut", "sam", "oracle"])
+    u.add_argument("--n-states", type=int, default=None, help="ablation: use 2 states instead of all")
+    u.add_argument("--quiet", action="store_true", help="no progress bars")
     return ap
 
 
@@ -174,13 +191,45 @@ def _render(args) -> int:
     return 0
 
 
+def _run(args) -> int:
+    import dataclasses
+
+    from pd2gs.data import parse_size
+    from pd2gs.discovery.config import DiscoveryConfig
+    from pd2gs.run import run
+    from pd2gs.train import TrainConfig
+    from rsart.errors import RsartError
+
+    tcfg = TrainConfig(size=parse_size(args.size))
+    if args.iters is not None:
+        if args.iters <= 0:
+            raise UsageError(f"--iters must be positive, got {args.iters}")
+        tcfg.iters = args.iters
+    over = {k: v for k, v in (("counter", args.counter), ("joint_rule", args.joint_rule),
+                              ("mask_provider", args.mask_provider), ("n_states", args.n_states)) if v is not None}
+    if args.no_refine:
+        over["refine"] = False
+    try:
+        dcfg = dataclasses.replace(DiscoveryConfig(), **over)
+    except ValueError as e:
+        raise UsageError(str(e)) from None
+    objects = [o for o in args.objects.split(",") if o] if args.objects else None
+    try:
+        sub = run(args.data, args.out, objects=objects, split=args.split, train_cfg=tcfg, discovery_cfg=dcfg,
+                  progress=not args.quiet)
+    except (RsartError, KeyError) as e:
+        raise UsageError(str(e)) from None
+    print(f"wrote {sub}; score it with: rsart-eval {sub} --data {args.data}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``pd2gs`` console script."""
     from pd2gs.data import DataError
 
     args = _parser().parse_args(argv)
     try:
-        return {"train": _train, "render": _render, "eval": _eval}[args.cmd](args)
+        return {"train": _train, "render": _render, "eval": _eval, "run": _run}[args.cmd](args)
     except (UsageError, DataError) as e:
         print(f"pd2gs: error: {e}", file=sys.stderr)
         return 2
