@@ -37,7 +37,7 @@ $(STAMP): pyproject.toml requirements.lock
 	@touch $(STAMP)
 
 demo: setup
-	$(PY) -m rsart.demo --out $(DEMO_OUT)
+	$(PY) -m pd2gs.demo --out $(DEMO_OUT)
 
 test: setup testdeps
 	$(PY) -m pytest -q $(PYTEST_ARGS)

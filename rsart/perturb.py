@@ -65,11 +65,19 @@ def perturb_object(src: str | Path, out: str | Path, rot_deg: float = 0.0, trans
     if not states:
         raise RsartError(f"{src}: no captured states (states/<id>/cameras.json) to perturb")
     estimate = None
-    if poses == "colmap":
+    if poses != "gt":
+        # pose estimators are plug-ins (entry-point group rsart.pose_estimators; capture_tools provides
+        # "colmap"), so rsart never imports capture_tools itself
+        from importlib.metadata import entry_points
+
+        eps = {ep.name: ep for ep in entry_points(group="rsart.pose_estimators")}
+        if poses not in eps:
+            raise RsartError(f"--poses {poses} needs a pose estimator plug-in named {poses!r} "
+                             f"(installed: {sorted(eps) or 'none'}; capture_tools provides 'colmap')")
         try:
-            from capture_tools.object_poses import estimate_state_poses as estimate
+            estimate = eps[poses].load()
         except ImportError as e:
-            raise RsartError(f"--poses colmap needs the capture_tools package (pycolmap): {e}") from None
+            raise RsartError(f"--poses {poses}: the estimator could not be loaded: {e}") from None
     rng = np.random.default_rng(seed)
     summary: dict = {"rot_deg": rot_deg, "trans": trans, "seed": seed, "poses": poses, "states": {}}
     record = {"source": poses, "rot_deg": rot_deg, "trans": trans, "seed": seed, "units": meta.units,

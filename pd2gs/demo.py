@@ -4,9 +4,8 @@ generate a twin (rsart-synth) -> load it -> render an RS-Art-style capture (pd2g
 run PD²GS (train, discover parts, joints, meshes) -> score the submission with rsart-eval ->
 print the table; pictures and every intermediate file are written under ``--out``.
 
-This module is glue for the demo only: it calls the public commands (`rsart render`, `pd2gs`
-via :mod:`pd2gs.run`, `rsart-eval`) the way a user would. rsart itself does not import pd2gs;
-the demo imports it lazily.
+It lives in pd2gs (which may use rsart; rsart never imports pd2gs) and calls the public
+commands (`rsart render`, :mod:`pd2gs.run`, `rsart-eval`) the way a user would.
 """
 from __future__ import annotations
 
@@ -23,8 +22,8 @@ def _say(msg: str) -> None:
 
 
 def stage_generate(out: Path, category: str, seed: int) -> Path:
-    from .sources.procedural.registry import generate
-    from .twin_io import write_object
+    from rsart.sources.procedural.registry import generate
+    from rsart.twin_io import write_object
 
     g = generate(category, seed)
     obj_dir = out / g.object_id
@@ -38,7 +37,7 @@ def stage_generate(out: Path, category: str, seed: int) -> Path:
 
 def stage_load(obj_dir: Path) -> None:
     import rsart
-    from .format import validate_path
+    from rsart.format import validate_path
 
     problems = validate_path(obj_dir)
     if problems:
@@ -56,7 +55,7 @@ def stage_load(obj_dir: Path) -> None:
 
 
 def stage_render(obj_dir: Path, data: Path, size: str, views: int) -> Path:
-    from .cli import main as rsart_main
+    from rsart.cli import main as rsart_main
 
     t0 = time.time()
     code = rsart_main(["render", str(obj_dir), "--protocol", "pd2gs", "--out", str(data), "--size", size,
@@ -64,7 +63,7 @@ def stage_render(obj_dir: Path, data: Path, size: str, views: int) -> Path:
     if code:
         raise SystemExit(f"demo: rsart render failed (exit {code})")
     out = data / obj_dir.name
-    from .render.contact_sheet import render_sheet
+    from rsart.render.contact_sheet import render_sheet
 
     sheet = render_sheet(out, data.parent / "capture.png")
     _say(f"[3] rendered the pd2gs protocol ({size}, {views} train views per state) in {time.time() - t0:.0f} s "
@@ -73,10 +72,8 @@ def stage_render(obj_dir: Path, data: Path, size: str, views: int) -> Path:
 
 
 def stage_pd2gs(data: Path, out: Path, iters: int) -> Path:
-    import importlib
-
-    run = importlib.import_module("pd2gs.run")
-    from pd2gs.train import TrainConfig
+    from . import run
+    from .train import TrainConfig
 
     t0 = time.time()
     sub = run.run(data, out, train_cfg=TrainConfig(iters=iters), progress=True)
@@ -85,7 +82,7 @@ def stage_pd2gs(data: Path, out: Path, iters: int) -> Path:
 
 
 def stage_eval(sub: Path, data: Path, out: Path) -> None:
-    from .evaluation.cli import main as eval_main
+    from rsart.evaluation.cli import main as eval_main
 
     code = eval_main([str(sub), "--data", str(data), "--out", str(out)])
     if code:
@@ -95,7 +92,7 @@ def stage_eval(sub: Path, data: Path, out: Path) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m rsart.demo", description=__doc__,
+    ap = argparse.ArgumentParser(prog="python -m pd2gs.demo", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", type=Path, default=Path("demo_out"), help="output folder (default demo_out/)")
     ap.add_argument("--category", default=DEFAULT_OBJECT[0])
