@@ -210,3 +210,24 @@ def resolve_inside(root: str | os.PathLike, rel: str) -> Path:
     if p != root_r and root_r not in p.parents:
         raise RsartError(f"{rel}: path leaves {root}")
     return p
+
+
+def copy_folder_contents(src: str | os.PathLike, dst: str | os.PathLike, skip: tuple[str, ...] = ()) -> None:
+    """Copy every entry of ``src`` (except names in ``skip`` and hidden ones) into ``dst``.
+
+    Refuses symbolic links at any depth (an object folder must be self-contained; following a link
+    could copy files from outside the folder the user named).
+    """
+    src, dst = Path(src), Path(dst)
+    for dirpath, dirnames, filenames in os.walk(src):
+        rel = Path(dirpath).relative_to(src)
+        if rel == Path("."):
+            dirnames[:] = [d for d in dirnames if d not in skip and not d.startswith(".")]
+            filenames = [f for f in filenames if f not in skip and not f.startswith(".")]
+        for name in dirnames + filenames:
+            if (Path(dirpath) / name).is_symlink():
+                raise RsartError(f"{Path(dirpath) / name}: symbolic links are not copied "
+                                 "(object folders must be self-contained)")
+        (dst / rel).mkdir(parents=True, exist_ok=True)
+        for f in filenames:
+            shutil.copy2(Path(dirpath) / f, dst / rel / f)

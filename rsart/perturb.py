@@ -17,14 +17,13 @@ order, so a copy is reproducible. What was done is recorded in ``meta.json`` (``
 from __future__ import annotations
 
 import math
-import shutil
 from pathlib import Path
 
 import numpy as np
 
 from .errors import RsartError
 from .format import CamerasFile, read_cameras, read_meta, write_cameras, write_meta
-from .io import atomic_dir
+from .io import atomic_dir, copy_folder_contents
 from .kinematics import rotation_matrix
 
 POSE_SOURCES = ("gt", "colmap")
@@ -83,13 +82,7 @@ def perturb_object(src: str | Path, out: str | Path, rot_deg: float = 0.0, trans
     record = {"source": poses, "rot_deg": rot_deg, "trans": trans, "seed": seed, "units": meta.units,
               "noise": "camera-frame rotation vector ~ N(0, rot_deg^2 I3) degrees; centre ~ N(0, trans^2 I3)"}
     with atomic_dir(out, overwrite=overwrite) as tmp:
-        for item in sorted(src.iterdir()):
-            if item.is_symlink():
-                raise RsartError(f"{item}: symbolic links are not copied")
-            if item.is_dir():
-                shutil.copytree(item, tmp / item.name, symlinks=False)
-            else:
-                shutil.copy2(item, tmp / item.name)
+        copy_folder_contents(src, tmp)
         for sid in states:
             cams = read_cameras(src / "states" / sid / "cameras.json")
             views = list(cams.views)

@@ -10,12 +10,11 @@
 from __future__ import annotations
 
 import re
-import shutil
 from pathlib import Path
 
 from ..errors import RsartError
 from ..format import meta_to_dict, read_index, read_meta
-from ..io import atomic_dir
+from ..io import atomic_dir, copy_folder_contents
 
 URDF_SUFFIXES = (".urdf",)
 USD_SUFFIXES = (".usd", ".usda", ".usdc")
@@ -39,15 +38,7 @@ def _copy_object(src: Path, dest: Path, overwrite: bool) -> Path:
         if not overwrite:
             raise RsartError(f"{dest}: holds a different object than {src}; use another --out or pass --overwrite")
     with atomic_dir(dest, overwrite=True) as tmp:
-        for item in sorted(src.iterdir()):
-            if item.name in _SKIP or item.name.startswith("."):
-                continue
-            if item.is_symlink():
-                raise RsartError(f"{item}: symbolic links are not copied (object folders must be self-contained)")
-            if item.is_dir():
-                shutil.copytree(item, tmp / item.name, symlinks=False)
-            else:
-                shutil.copy2(item, tmp / item.name)
+        copy_folder_contents(src, tmp, skip=_SKIP)
     return dest
 
 

@@ -86,3 +86,19 @@ def test_verify_reports_missing_extra_corrupt(tmp_path):
     (tmp_path / "new.txt").write_text("n")
     r = verify(tmp_path)
     assert (r.corrupt, r.missing, r.extra) == (["y.txt"], ["z.txt"], ["new.txt"])
+
+
+def test_copy_folder_contents_refuses_nested_symlinks(tmp_path):
+    from rsart.io import copy_folder_contents
+
+    src = tmp_path / "src"
+    (src / "twin" / "parts").mkdir(parents=True)
+    (src / "meta.json").write_text("{}")
+    (src / "twin" / "parts" / "a.ply").write_text("x")
+    (src / "states").mkdir()
+    copy_folder_contents(src, tmp_path / "out", skip=("states",))
+    assert (tmp_path / "out" / "twin" / "parts" / "a.ply").read_text() == "x"
+    assert not (tmp_path / "out" / "states").exists()
+    (src / "twin" / "parts" / "evil.ply").symlink_to("/etc/hostname")
+    with pytest.raises(RsartError, match="symbolic links"):
+        copy_folder_contents(src, tmp_path / "out2")
