@@ -21,8 +21,9 @@ def bin_gaussians_cpu(
     tiles_x, tiles_y = tile_grid(width, height)
     rect = [r.numpy().copy() for r in tile_rects(means2d, radii, width, height)]
     if conics is not None and opacities is not None:
-        kern.tighten_rects(*rect, means2d.detach().double().numpy(), conics.detach().double().numpy(),
-                           opacities.detach().double().numpy(), ALPHA_MIN)
+        kern.tighten_rects(*rect, means2d.detach().contiguous().numpy(),
+                           conics.detach().contiguous().numpy(),
+                           opacities.detach().contiguous().numpy(), ALPHA_MIN)
     vis = torch.nonzero(radii > 0).flatten()
     order = vis[torch.argsort(depths.detach()[vis], stable=True)].numpy()
     xmin, xmax, ymin, ymax = rect
@@ -37,6 +38,7 @@ class _CpuComposite(torch.autograd.Function):
     def forward(ctx, means2d, conics, opacities, features, offsets, gids, width, height,
                 labels, num_labels, want_max):
         dt = means2d.detach().numpy().dtype
+        n_in = means2d.shape[0]
         arrays = [x.detach().contiguous().numpy() for x in (means2d, conics, opacities, features)]
         consts = kern.make_consts(dt, ALPHA_MAX, ALPHA_MIN, T_MIN)
         tiles_x, _ = tile_grid(width, height)
@@ -47,9 +49,10 @@ class _CpuComposite(torch.autograd.Function):
             lab, lw = np.zeros(1, np.int64), np.zeros((1, 1, 0), dt)
         maxw_pair = np.zeros(gids.shape[0] if want_max else 0, dt)
         order = kern.tile_order(offsets, numba.get_num_threads())
-        out, trans, last = kern.forward_kernel(offsets, gids, *arrays, width, height,
+        prep = kern.prep_gaussians(*arrays, ALPHA_MIN)
+        out, trans, last = kern.forward_kernel(offsets, gids, prep, width, height,
                                                tiles_x, consts, lab, lw, maxw_pair, order)
-        ctx.state = (offsets, gids, arrays, width, height, tiles_x, consts, trans, last, order)
+        ctx.state = (offsets, gids, prep, n_in, width, height, tiles_x, consts, trans, last, order)
         n = means2d.shape[0]
         maxw = torch.from_numpy(kern.reduce_max(gids, maxw_pair, n)) if want_max else None
         lw_t = torch.from_numpy(lw) if labels is not None else None
@@ -60,16 +63,13 @@ class _CpuComposite(torch.autograd.Function):
 
     @staticmethod
     def backward(ctx, g_feat, g_trans, _g_lw, _g_max):
-        offsets, gids, arrays, width, height, tiles_x, consts, trans, last, order = ctx.state
-        dt = arrays[0].dtype
-        gf = (g_feat if g_feat is not None else torch.zeros(height, width, 4)).to(
-            torch.from_numpy(arrays[0]).dtype).contiguous().numpy()
-        gt = (g_trans if g_trans is not None else torch.zeros(height, width)).to(
-            torch.from_numpy(arrays[0]).dtype).contiguous().numpy()
-        pair = kern.backward_kernel(offsets, gids, *arrays, width, height, tiles_x,
-                                    consts, trans, last, gf.astype(dt, copy=False),
-                                    gt.astype(dt, copy=False), order)
-        g = torch.from_numpy(kern.reduce_pairs(gids, pair, arrays[0].shape[0]))
+        offsets, gids, prep, n_in, width, height, tiles_x, consts, trans, last, order = ctx.state
+        tdt = torch.from_numpy(prep[:0]).dtype
+        gf = (g_feat if g_feat is not None else torch.zeros(height, width, 4)).to(tdt).contiguous().numpy()
+        gt = (g_trans if g_trans is not None else torch.zeros(height, width)).to(tdt).contiguous().numpy()
+        pair = kern.backward_kernel(offsets, gids, prep, width, height, tiles_x,
+                                    consts, trans, last, gf, gt, order)
+        g = torch.from_numpy(kern.reduce_pairs(gids, pair, n_in))
         return g[:, 0:2], g[:, 2:5], g[:, 5], g[:, 6:10], None, None, None, None, None, None, None
 
 

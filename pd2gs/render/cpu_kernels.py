@@ -13,7 +13,9 @@ Feature layout: F = 4 channels per Gaussian (r, g, b, camera depth z).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import carray, njit, prange, types
+from numba.core import cgutils
+from numba.extending import intrinsic
 
 TILE = 16
 
@@ -72,256 +74,333 @@ def bin_tiles(xmin, xmax, ymin, ymax, order, tiles_x, n_tiles):
     return offsets, gids
 
 
-# consts layout (all in the working dtype), built by ``make_consts``.
-C_AMAX, C_AMIN, C_TMIN, C_ONE, C_HALF, C_ZERO, C_LOG2E, C_LN2, C_CUT, C_Q4, C_Q16, C_Q256 = range(12)
-C_POLY = 12  # 8 Taylor coefficients 1/j!, j = 0..7
+@intrinsic
+def _stack(typingctx, n, dtype):
+    """Pointer to ``n`` (a literal) uninitialised elements of ``dtype`` on the stack."""
+    if not isinstance(n, types.IntegerLiteral):
+        return None
+    ety = dtype.dtype if isinstance(dtype, types.DType) else dtype.instance_type
+
+    def codegen(context, builder, sig, args):
+        return cgutils.alloca_once(builder, context.get_value_type(ety), size=n.literal_value)
+
+    return types.CPointer(ety)(n, dtype), codegen
+
+
+# prep layout: per Gaussian
+P_MX, P_MY, P_A, P_B, P_C, P_O, P_F0, P_F1, P_F2, P_F3, P_YLO, P_YHI, P_CA, P_CB, P_CC = range(15)
+NPREP = 16
+LOG2E = 1.4426950408889634
+LN2 = 0.6931471805599453
+
+
+@njit(cache=True, error_model="numpy")
+def prep_gaussians(means2d, conics, opac, feat, amin):
+    """Per-Gaussian packed constants: log2-scaled quadratic coefficients and the pixel rows
+    [ylo, yhi) where alpha >= amin is possible (empty if o < amin)."""
+    n = means2d.shape[0]
+    out = np.zeros((n, NPREP), means2d.dtype)
+    for g in range(n):
+        mx, my = means2d[g, 0], means2d[g, 1]
+        ca, cb, cc, o = conics[g, 0], conics[g, 1], conics[g, 2], opac[g]
+        out[g, P_MX] = mx
+        out[g, P_MY] = my
+        out[g, P_A] = -0.5 * LOG2E * ca
+        out[g, P_B] = -LOG2E * cb
+        out[g, P_C] = -0.5 * LOG2E * cc
+        out[g, P_O] = o
+        out[g, P_F0] = feat[g, 0]
+        out[g, P_F1] = feat[g, 1]
+        out[g, P_F2] = feat[g, 2]
+        out[g, P_F3] = feat[g, 3]
+        out[g, P_CA] = ca
+        out[g, P_CB] = cb
+        out[g, P_CC] = cc
+        if not o >= amin:
+            out[g, P_YLO] = 0
+            out[g, P_YHI] = 0
+            continue
+        det = ca * cc - cb * cb
+        if det > 0:
+            hy = np.sqrt(-2.0 * np.log(amin / o) * ca / det) + 1.0
+            if hy < 1e6:
+                out[g, P_YLO] = np.floor(my - hy)
+                out[g, P_YHI] = np.ceil(my + hy) + 1
+                continue
+        out[g, P_YLO] = -1e9
+        out[g, P_YHI] = 1e9
+    return out
+
+# constants layout (working dtype)
+K_AMAX, K_AMIN, K_TMIN, K_ONE, K_HALF, K_ZERO, K_ZCUT = range(7)
+K_POLY = 7  # 8 coefficients ln2^j / j!
+K_Q = 15    # 1/256, 1/16, 1/4, 1/2
+K_EIGHT, K_FOUR, K_TWO = 19, 20, 21
 
 
 def make_consts(dtype, alpha_max: float, alpha_min: float, t_min: float) -> np.ndarray:
-    """Typed constants for the kernels (see C_* indices)."""
-    vals = [alpha_max, alpha_min, t_min, 1.0, 0.5, 0.0, 1.4426950408889634, 0.6931471805599453,
-            np.log(alpha_min) - 0.1, 0.25, 1.0 / 16, 1.0 / 256]
+    vals = [alpha_max, alpha_min, t_min, 1.0, 0.5, 0.0, np.log2(alpha_min) - 0.2]
     fact = 1.0
     for j in range(8):
         fact *= max(j, 1)
-        vals.append(1.0 / fact)
+        vals.append(LN2 ** j / fact)
+    vals += [1.0 / 256, 1.0 / 16, 0.25, 0.5, 8.0, 4.0, 2.0]
     return np.array(vals, dtype=dtype)
 
 
 @njit(inline="always")
-def _exp_consts(c):
-    """Constants of ``_exp_neg`` as a tuple of scalars (keeps array loads out of the loops)."""
-    return (c[C_HALF], c[C_ONE], c[C_ZERO], c[C_LOG2E], c[C_LN2], c[C_CUT],
-            c[C_POLY], c[C_POLY + 1], c[C_POLY + 2], c[C_POLY + 3], c[C_POLY + 4],
-            c[C_POLY + 5], c[C_POLY + 6], c[C_POLY + 7], c[C_HALF], c[C_Q4], c[C_Q16], c[C_Q256])
+def _ec(c):
+    return (c[K_ZCUT], c[K_ZERO], c[K_HALF], c[K_POLY], c[K_POLY + 1], c[K_POLY + 2],
+            c[K_POLY + 3], c[K_POLY + 4], c[K_POLY + 5], c[K_POLY + 6], c[K_POLY + 7],
+            c[K_ONE], c[K_Q], c[K_Q + 1], c[K_Q + 2], c[K_Q + 3], c[K_EIGHT], c[K_FOUR],
+            c[K_TWO])
 
 
 @njit(inline="always")
-def _exp_neg(x, e):
-    """exp(x) for x in [log(1/255) - 0.1, 0] by range reduction and a degree-7 Taylor
-    polynomial (relative error ~1e-9); returns 0 below that range. Arithmetic and selects
-    only, so the pixel loops vectorise (numba has no SIMD exp here). e = _exp_consts(c)."""
-    nf = np.floor(x * e[3] + e[0])
-    f = x - nf * e[4]
-    p = ((((((e[13] * f + e[12]) * f + e[11]) * f + e[10]) * f + e[9]) * f + e[8]) * f
-         + e[7]) * f + e[6]
-    ok = x >= e[5]
-    m = np.int64(-nf) if ok else np.int64(0)
-    s = e[1]
-    s = s * e[14] if (m & 1) != 0 else s
-    s = s * e[15] if (m & 2) != 0 else s
-    s = s * e[16] if (m & 4) != 0 else s
-    s = s * e[17] if (m & 8) != 0 else s
-    return p * s if ok else e[2]
+def _exp2(z, e):
+    """2**z for z in [zcut, 0] (z is clamped to that range; callers reject z > 0 and
+    2**zcut < alpha_min). Degree-7 polynomial on the fraction, exact power-of-two scaling by
+    selects, so the 16-pixel loops vectorise (relative error ~1e-9 in float64)."""
+    zc = min(max(z, e[0]), e[1])
+    nf = np.floor(zc + e[2])
+    f = zc - nf
+    p = ((((((e[10] * f + e[9]) * f + e[8]) * f + e[7]) * f + e[6]) * f + e[5]) * f
+         + e[4]) * f + e[3]
+    m = -nf
+    s = e[11]
+    b = m >= e[16]
+    s = s * e[12] if b else s
+    m = m - e[16] if b else m
+    b = m >= e[17]
+    s = s * e[13] if b else s
+    m = m - e[17] if b else m
+    b = m >= e[18]
+    s = s * e[14] if b else s
+    m = m - e[18] if b else m
+    b = m >= e[11]
+    s = s * e[15] if b else s
+    return p * s
 
 
-@njit(inline="always")
-def _row_range(my, ca, cb, cc, o, amin, y0):
-    """Tile-local rows [lo, hi) where alpha >= amin is possible: the ellipse
-    d^T conic d <= -2 log(amin / o), widened by one pixel for rounding. Empty if o < amin."""
-    if not o >= amin:
-        return 0, 0
-    det = ca * cc - cb * cb
-    r2 = -2.0 * np.log(amin / o)
-    hy = np.sqrt(r2 * ca / det) + 1.0 if det > 0 else 1e30
-    lo = max(0, np.int64(np.floor(my - hy)) - y0) if hy < 1e6 else 0
-    hi = min(TILE, np.int64(np.ceil(my + hy)) - y0 + 1) if hy < 1e6 else TILE
-    return lo, hi
-
-
-@njit(fastmath=True)
-def _sum(buf):
-    """Sum of a 1-D array (reassociation allowed: vectorised)."""
-    acc = buf[0] - buf[0]
-    for i in range(buf.shape[0]):
-        acc += buf[i]
-    return acc
-
-
-def tile_order(offsets: np.ndarray, threads: int) -> np.ndarray:
-    """Tiles sorted by decreasing list length, dealt round-robin to the threads: prange splits
-    its range into one contiguous block per thread, so block j holds ranks j, j + T, j + 2T...
-    and every thread gets a similar share of heavy and light tiles. (T+0,) int64."""
-    ranked = np.argsort(-(offsets[1:] - offsets[:-1]), kind="stable")
-    return np.concatenate([ranked[j::max(threads, 1)] for j in range(max(threads, 1))])
-
-
-@njit(parallel=True, cache=True, error_model="numpy")
-def forward_kernel(offsets, gids, means2d, conics, opac, feat, width, height, tiles_x,
-                   c, labels, lw_out, maxw_pair, order):
-    """Front-to-back compositing of each 16x16 tile, Gaussians outer, the 256 pixels inner.
-
-    c: constants from ``make_consts``. labels: (N,) int64 (used when lw_out has L > 0
-    channels); lw_out: (H, W, L) output; maxw_pair: (P,) output (ignored when size 0).
-    Returns feat_out (H, W, 4), trans (H, W), last (H, W) int64 = one past the last composited
-    list entry of each pixel (the backward walks back from there).
-    """
-    dt = means2d.dtype
-    one, zero = c[C_ONE], c[C_ZERO]
+@njit(parallel=True, cache=True, error_model="numpy", fastmath={"contract"})
+def forward_kernel(offsets, gids, prep, width, height, tiles_x, c, labels, lw_out, maxw_pair,
+                   order):
+    """Front-to-back compositing of each 16x16 tile: Gaussians outer, then the rows the
+    Gaussian can reach, then the 16 pixels of a row (one SIMD vector in float32).
+    Returns feat_out (H, W, 4), trans (H, W), last (H, W) int32."""
+    dt = prep.dtype
+    one, zero = c[K_ONE], c[K_ZERO]
     out = np.zeros((height, width, 4), dt)
     trans = np.ones((height, width), dt)
-    last = np.zeros((height, width), np.int64)
+    last = np.zeros((height, width), np.int32)
     n_lab = lw_out.shape[2]
     want_max = maxw_pair.shape[0] > 0
-    amax, amin, tmin, half = c[C_AMAX], c[C_AMIN], c[C_TMIN], c[C_HALF]
-    ec = _exp_consts(c)
-    npx = TILE * TILE
+    amax, amin, tmin = c[K_AMAX], c[K_AMIN], c[K_TMIN]
+    ec = _ec(c)
     for i in prange(order.shape[0]):
         t = order[i]
         x0 = (t % tiles_x) * TILE
         y0 = (t // tiles_x) * TILE
         start, end = offsets[t], offsets[t + 1]
-        px = np.empty(npx, dt)
-        py = np.empty(npx, dt)
-        act = np.zeros(npx, dt)
-        T = np.ones(npx, dt)
-        lst = np.zeros(npx, np.int64)
-        a0 = np.zeros(npx, dt)
-        a1 = np.zeros(npx, dt)
-        a2 = np.zeros(npx, dt)
-        a3 = np.zeros(npx, dt)
-        wbuf = np.zeros(npx, dt)
-        lw = np.zeros((max(n_lab, 1), npx), dt)
-        for p in range(npx):
-            px[p] = x0 + p % TILE
-            py[p] = y0 + p // TILE
-            if x0 + p % TILE < width and y0 + p // TILE < height:
-                act[p] = one
+        xs = carray(_stack(16, dt), 16)
+        ys = carray(_stack(16, dt), 16)
+        T = carray(_stack(256, dt), (16, 16))
+        act = carray(_stack(256, dt), (16, 16))
+        a0 = carray(_stack(256, dt), (16, 16))
+        a1 = carray(_stack(256, dt), (16, 16))
+        a2 = carray(_stack(256, dt), (16, 16))
+        a3 = carray(_stack(256, dt), (16, 16))
+        wb = carray(_stack(256, dt), (16, 16))
+        lst = carray(_stack(256, np.int32), (16, 16))
+        lw = np.zeros((max(n_lab, 1), 16, 16), dt)
+        for j in range(16):
+            xs[j] = x0 + j
+            ys[j] = y0 + j
+        for r in range(16):
+            for j in range(16):
+                T[r, j] = one
+                a0[r, j] = zero
+                a1[r, j] = zero
+                a2[r, j] = zero
+                a3[r, j] = zero
+                wb[r, j] = zero
+                lst[r, j] = 0
+                act[r, j] = one if (x0 + j < width and y0 + r < height) else zero
         for k in range(start, end):
-            if (k - start) % 32 == 31 and _sum(act) == zero:
-                break
+            if (k - start) % 32 == 31:
+                alive = zero
+                for r in range(16):
+                    ar = act[r]
+                    for j in range(16):
+                        alive += ar[j]
+                if alive == zero:
+                    break
             g = gids[k]
-            mx, my = means2d[g, 0], means2d[g, 1]
-            ca, cb, cc, o = conics[g, 0], conics[g, 1], conics[g, 2], opac[g]
-            f0, f1, f2, f3 = feat[g, 0], feat[g, 1], feat[g, 2], feat[g, 3]
-            lo, hi = _row_range(my, ca, cb, cc, o, amin, y0)
-            for p in range(lo * TILE, hi * TILE):
-                dx = px[p] - mx
-                dy = py[p] - my
-                power = -half * (ca * dx * dx + cc * dy * dy) - cb * dx * dy
-                alpha = min(amax, o * _exp_neg(power, ec))
-                tp = T[p]
-                test = tp * (one - alpha)
-                good = (power <= zero) & (alpha >= amin) & (act[p] > zero)
-                contrib = good & (test >= tmin)
-                stop = good & (test < tmin)
-                w = alpha * tp if contrib else zero
-                wbuf[p] = w
-                a0[p] += w * f0
-                a1[p] += w * f1
-                a2[p] += w * f2
-                a3[p] += w * f3
-                T[p] = test if contrib else tp
-                act[p] = zero if stop else act[p]
-                lst[p] = k + 1 if contrib else lst[p]
+            mx, my = prep[g, P_MX], prep[g, P_MY]
+            A, B, C, o = prep[g, P_A], prep[g, P_B], prep[g, P_C], prep[g, P_O]
+            f0, f1, f2, f3 = prep[g, P_F0], prep[g, P_F1], prep[g, P_F2], prep[g, P_F3]
+            lo = max(np.int64(prep[g, P_YLO]) - y0, 0)
+            hi = min(np.int64(prep[g, P_YHI]) - y0, TILE)
+            kk = np.int32(k + 1)
+            for r in range(lo, hi):
+                dy = ys[r] - my
+                cy = C * dy * dy
+                by = B * dy
+                Tr, actr, wr, lr = T[r], act[r], wb[r], lst[r]
+                a0r, a1r, a2r, a3r = a0[r], a1[r], a2[r], a3[r]
+                for j in range(16):
+                    dx = xs[j] - mx
+                    z = (A * dx + by) * dx + cy
+                    alpha = min(amax, o * _exp2(z, ec))
+                    tp = Tr[j]
+                    test = tp * (one - alpha)
+                    good = (z <= zero) & (alpha >= amin) & (actr[j] > zero)
+                    contrib = good & (test >= tmin)
+                    stop = good & (test < tmin)
+                    w = alpha * tp if contrib else zero
+                    wr[j] = w
+                    a0r[j] += w * f0
+                    a1r[j] += w * f1
+                    a2r[j] += w * f2
+                    a3r[j] += w * f3
+                    Tr[j] = test if contrib else tp
+                    actr[j] = zero if stop else actr[j]
+                    lr[j] = kk if contrib else lr[j]
             if n_lab > 0:
                 lab = labels[g]
-                for p in range(lo * TILE, hi * TILE):
-                    lw[lab, p] += wbuf[p]
+                for r in range(lo, hi):
+                    for j in range(16):
+                        lw[lab, r, j] += wb[r, j]
             if want_max:
-                maxw_pair[k] = np.max(wbuf[lo * TILE:hi * TILE]) if hi > lo else zero
-        for p in range(npx):
-            x, y = x0 + p % TILE, y0 + p // TILE
-            if x < width and y < height:
-                out[y, x, 0] = a0[p]
-                out[y, x, 1] = a1[p]
-                out[y, x, 2] = a2[p]
-                out[y, x, 3] = a3[p]
-                trans[y, x] = T[p]
-                last[y, x] = lst[p]
-                for j in range(n_lab):
-                    lw_out[y, x, j] = lw[j, p]
+                m = zero
+                for r in range(lo, hi):
+                    for j in range(16):
+                        m = max(m, wb[r, j])
+                maxw_pair[k] = m
+        for r in range(16):
+            for j in range(16):
+                x, y = x0 + j, y0 + r
+                if x < width and y < height:
+                    out[y, x, 0] = a0[r, j]
+                    out[y, x, 1] = a1[r, j]
+                    out[y, x, 2] = a2[r, j]
+                    out[y, x, 3] = a3[r, j]
+                    trans[y, x] = T[r, j]
+                    last[y, x] = lst[r, j]
+                    for q in range(n_lab):
+                        lw_out[y, x, q] = lw[q, r, j]
     return out, trans, last
 
 
-@njit(parallel=True, cache=True, error_model="numpy", fastmath={"reassoc", "nsz"})
-def backward_kernel(offsets, gids, means2d, conics, opac, feat, width, height, tiles_x,
-                    c, trans, last, g_feat, g_trans, order):
+@njit(parallel=True, cache=True, error_model="numpy", fastmath={"contract", "reassoc", "nsz"})
+def backward_kernel(offsets, gids, prep, width, height, tiles_x, c, trans, last, g_feat,
+                    g_trans, order):
     """Exact gradients of ``forward_kernel``: each pixel walks its list back to front
-    (transmittance recovered by division, as in 3DGS), Gaussians outer, pixels inner.
-
-    g_feat: (H, W, 4) dL/dfeat_out, g_trans: (H, W) dL/dtrans.
-    Returns pair_grad (P, 10): per list entry [dmean2d(2), dconic(3), dopacity, dfeat(4)].
-    """
-    dt = means2d.dtype
-    one, zero, half = c[C_ONE], c[C_ZERO], c[C_HALF]
-    amax, amin = c[C_AMAX], c[C_AMIN]
-    ec = _exp_consts(c)
+    (transmittance recovered by division, as in 3DGS), Gaussians outer, rows, 16 pixels.
+    Returns pair_grad (P, 10): per list entry [dmean2d(2), dconic(3), dopacity, dfeat(4)]."""
+    dt = prep.dtype
+    one, zero, half = c[K_ONE], c[K_ZERO], c[K_HALF]
+    amax, amin = c[K_AMAX], c[K_AMIN]
+    ec = _ec(c)
     pair_grad = np.zeros((gids.shape[0], 10), dt)
-    npx = TILE * TILE
     for i in prange(order.shape[0]):
         t = order[i]
         x0 = (t % tiles_x) * TILE
         y0 = (t // tiles_x) * TILE
         start = offsets[t]
-        px = np.empty(npx, dt)
-        py = np.empty(npx, dt)
-        T = np.ones(npx, dt)
-        tf = np.ones(npx, dt)
-        lst = np.zeros(npx, np.int64)
-        g0 = np.zeros(npx, dt)
-        g1 = np.zeros(npx, dt)
-        g2 = np.zeros(npx, dt)
-        g3 = np.zeros(npx, dt)
-        gt = np.zeros(npx, dt)
-        s0 = np.zeros(npx, dt)
-        s1 = np.zeros(npx, dt)
-        s2 = np.zeros(npx, dt)
-        s3 = np.zeros(npx, dt)
+        xs = carray(_stack(16, dt), 16)
+        ys = carray(_stack(16, dt), 16)
+        T = carray(_stack(256, dt), (16, 16))
+        tf = carray(_stack(256, dt), (16, 16))
+        lst = carray(_stack(256, np.int32), (16, 16))
+        g0 = carray(_stack(256, dt), (16, 16))
+        g1 = carray(_stack(256, dt), (16, 16))
+        g2 = carray(_stack(256, dt), (16, 16))
+        g3 = carray(_stack(256, dt), (16, 16))
+        gt = carray(_stack(256, dt), (16, 16))
+        s0 = carray(_stack(256, dt), (16, 16))
+        s1 = carray(_stack(256, dt), (16, 16))
+        s2 = carray(_stack(256, dt), (16, 16))
+        s3 = carray(_stack(256, dt), (16, 16))
+        for j in range(16):
+            xs[j] = x0 + j
+            ys[j] = y0 + j
         kmax = start
-        for p in range(npx):
-            x, y = x0 + p % TILE, y0 + p // TILE
-            px[p] = x
-            py[p] = y
-            if x < width and y < height:
-                T[p] = trans[y, x]
-                tf[p] = trans[y, x]
-                lst[p] = last[y, x]
-                kmax = max(kmax, last[y, x])
-                gt[p] = g_trans[y, x]
-                g0[p] = g_feat[y, x, 0]
-                g1[p] = g_feat[y, x, 1]
-                g2[p] = g_feat[y, x, 2]
-                g3[p] = g_feat[y, x, 3]
+        for r in range(16):
+            for j in range(16):
+                x, y = x0 + j, y0 + r
+                s0[r, j] = zero
+                s1[r, j] = zero
+                s2[r, j] = zero
+                s3[r, j] = zero
+                if x < width and y < height:
+                    T[r, j] = trans[y, x]
+                    tf[r, j] = trans[y, x]
+                    lst[r, j] = last[y, x]
+                    kmax = max(kmax, np.int64(last[y, x]))
+                    gt[r, j] = g_trans[y, x]
+                    g0[r, j] = g_feat[y, x, 0]
+                    g1[r, j] = g_feat[y, x, 1]
+                    g2[r, j] = g_feat[y, x, 2]
+                    g3[r, j] = g_feat[y, x, 3]
+                else:
+                    T[r, j] = one
+                    tf[r, j] = one
+                    lst[r, j] = 0
+                    gt[r, j] = zero
+                    g0[r, j] = zero
+                    g1[r, j] = zero
+                    g2[r, j] = zero
+                    g3[r, j] = zero
         for k in range(kmax - 1, start - 1, -1):
             g = gids[k]
-            mx, my = means2d[g, 0], means2d[g, 1]
-            ca, cb, cc, o = conics[g, 0], conics[g, 1], conics[g, 2], opac[g]
-            f0, f1, f2, f3 = feat[g, 0], feat[g, 1], feat[g, 2], feat[g, 3]
+            mx, my = prep[g, P_MX], prep[g, P_MY]
+            A, B, C, o = prep[g, P_A], prep[g, P_B], prep[g, P_C], prep[g, P_O]
+            ca, cb, cc = prep[g, P_CA], prep[g, P_CB], prep[g, P_CC]
+            f0, f1, f2, f3 = prep[g, P_F0], prep[g, P_F1], prep[g, P_F2], prep[g, P_F3]
+            lo = max(np.int64(prep[g, P_YLO]) - y0, 0)
+            hi = min(np.int64(prep[g, P_YHI]) - y0, TILE)
+            kk = np.int32(k)
             r0 = r1 = r2 = r3 = r4 = r5 = r6 = r7 = r8 = r9 = zero
-            lo, hi = _row_range(my, ca, cb, cc, o, amin, y0)
-            for p in range(lo * TILE, hi * TILE):
-                dx = px[p] - mx
-                dy = py[p] - my
-                power = -half * (ca * dx * dx + cc * dy * dy) - cb * dx * dy
-                gauss = _exp_neg(power, ec)
-                raw = o * gauss
-                alpha = min(amax, raw)
-                good = (power <= zero) & (alpha >= amin) & (k < lst[p])
-                om = one - alpha
-                tp = T[p]
-                ti = tp / om if good else tp
-                wt = alpha * ti if good else zero
-                dal = ti * (g0[p] * (f0 - s0[p]) + g1[p] * (f1 - s1[p]) + g2[p] * (f2 - s2[p])
-                            + g3[p] * (f3 - s3[p])) - gt[p] * tf[p] / om
-                dal = dal if good else zero
-                s0[p] = alpha * f0 + om * s0[p] if good else s0[p]
-                s1[p] = alpha * f1 + om * s1[p] if good else s1[p]
-                s2[p] = alpha * f2 + om * s2[p] if good else s2[p]
-                s3[p] = alpha * f3 + om * s3[p] if good else s3[p]
-                T[p] = ti
-                dgeo = dal if raw <= amax else zero
-                dpow = alpha * dgeo
-                r0 += dpow * (ca * dx + cb * dy)
-                r1 += dpow * (cb * dx + cc * dy)
-                r2 += -half * dx * dx * dpow
-                r3 += -dx * dy * dpow
-                r4 += -half * dy * dy * dpow
-                r5 += gauss * dgeo
-                r6 += wt * g0[p]
-                r7 += wt * g1[p]
-                r8 += wt * g2[p]
-                r9 += wt * g3[p]
+            for r in range(lo, hi):
+                dy = ys[r] - my
+                cy = C * dy * dy
+                by = B * dy
+                Tr, tfr, lr, gtr = T[r], tf[r], lst[r], gt[r]
+                g0r, g1r, g2r, g3r = g0[r], g1[r], g2[r], g3[r]
+                s0r, s1r, s2r, s3r = s0[r], s1[r], s2[r], s3[r]
+                for j in range(16):
+                    dx = xs[j] - mx
+                    z = (A * dx + by) * dx + cy
+                    gauss = _exp2(z, ec)
+                    raw = o * gauss
+                    alpha = min(amax, raw)
+                    good = (z <= zero) & (alpha >= amin) & (kk < lr[j])
+                    om = one - alpha
+                    tp = Tr[j]
+                    ti = tp / om if good else tp
+                    wt = alpha * ti if good else zero
+                    dal = ti * (g0r[j] * (f0 - s0r[j]) + g1r[j] * (f1 - s1r[j])
+                                + g2r[j] * (f2 - s2r[j]) + g3r[j] * (f3 - s3r[j])) \
+                        - gtr[j] * tfr[j] / om
+                    dal = dal if good else zero
+                    s0r[j] = alpha * f0 + om * s0r[j] if good else s0r[j]
+                    s1r[j] = alpha * f1 + om * s1r[j] if good else s1r[j]
+                    s2r[j] = alpha * f2 + om * s2r[j] if good else s2r[j]
+                    s3r[j] = alpha * f3 + om * s3r[j] if good else s3r[j]
+                    Tr[j] = ti
+                    dgeo = dal if raw <= amax else zero
+                    dpow = alpha * dgeo
+                    r0 += dpow * (ca * dx + cb * dy)
+                    r1 += dpow * (cb * dx + cc * dy)
+                    r2 += -half * dx * dx * dpow
+                    r3 += -dx * dy * dpow
+                    r4 += -half * dy * dy * dpow
+                    r5 += gauss * dgeo
+                    r6 += wt * g0r[j]
+                    r7 += wt * g1r[j]
+                    r8 += wt * g2r[j]
+                    r9 += wt * g3r[j]
             pair_grad[k, 0] = r0
             pair_grad[k, 1] = r1
             pair_grad[k, 2] = r2
@@ -333,6 +412,14 @@ def backward_kernel(offsets, gids, means2d, conics, opac, feat, width, height, t
             pair_grad[k, 8] = r8
             pair_grad[k, 9] = r9
     return pair_grad
+
+
+def tile_order(offsets: np.ndarray, threads: int) -> np.ndarray:
+    """Tiles sorted by decreasing list length, dealt round-robin to the threads: prange splits
+    its range into one contiguous block per thread, so block j holds ranks j, j + T, j + 2T...
+    and every thread gets a similar share of heavy and light tiles. (T+0,) int64."""
+    ranked = np.argsort(-(offsets[1:] - offsets[:-1]), kind="stable")
+    return np.concatenate([ranked[j::max(threads, 1)] for j in range(max(threads, 1))])
 
 
 @njit(cache=True)
