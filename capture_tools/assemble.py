@@ -28,7 +28,8 @@ from rsart.format import CamerasFile, State, ViewRecord, write_cameras
 from rsart.io import atomic_dir, write_depth_png, write_json, write_mask_png, write_png_rgb
 from rsart.kinematics import Twin
 
-from .pipeline import CaptureSettings, process_state
+from .joint import process_joint
+from .pipeline import CaptureSettings, process_state, reconstruct_state
 from .readers import open_recording
 
 
@@ -118,10 +119,7 @@ def assemble(raw_dir: str | Path, twin_path: str | Path, states_yaml: str | Path
         write_object(twin, tmp, object_id=object_id, category=str(log.get("category", "unknown")),
                      source={"kind": "rs-art", "id": object_id, "capture": "capture_tools"},
                      units=str(log.get("units", "m")), states=states, eval_states=dict(eval_states), overwrite=True)
-        for st, rp in zip(states, recs):
-            progress(f"[{st.id}] {rp}")
-            rec = open_recording(rp)
-            res = process_state(rec, twin, st.values, settings)
+        for st, rec, res in _results(states, recs, twin, settings, report, progress):
             sdir = tmp / "states" / st.id
             views = []
             for i, f in enumerate(res.frames):
@@ -141,6 +139,35 @@ def assemble(raw_dir: str | Path, twin_path: str | Path, states_yaml: str | Path
                      f"(fitness {r['icp_fitness']:.3f})")
         write_json(tmp / "capture.json", report)
     return report
+
+
+def _results(states: list[State], recs: list[str], twin: Twin, settings: CaptureSettings, report: dict, progress):
+    """(state, recording, StateResult) per state: one state at a time (``per-state``), or all reconstructed
+    first and then solved together (``joint``, capture_tools.joint; figures in ``report["joint"]``)."""
+    if settings.sfm not in ("per-state", "joint"):
+        raise RsartError(f"SfM mode {settings.sfm!r} is not 'per-state' or 'joint'")
+    report["settings"]["sfm"] = settings.sfm
+    if settings.sfm == "per-state":
+        for st, rp in zip(states, recs):
+            progress(f"[{st.id}] {rp}")
+            rec = open_recording(rp)
+            yield st, rec, process_state(rec, twin, st.values, settings)
+        return
+    opened, recons = [], []
+    for st, rp in zip(states, recs):
+        progress(f"[{st.id}] {rp}: reconstructing")
+        rec = open_recording(rp)
+        opened.append(rec)
+        recons.append(reconstruct_state(rec, settings))
+    K = opened[0].intrinsics
+    for st, rec in zip(states, opened):
+        if rec.intrinsics.to_dict() != K.to_dict():
+            raise RsartError(f"{rec.source}: joint SfM needs one camera; state {st.id}'s intrinsics differ "
+                             f"from {states[0].id}'s (use --sfm per-state)")
+    progress(f"joint SfM over {sum(len(r.frames) for r in recons)} frames of {len(states)} states")
+    results, report["joint"] = process_joint(recons, [s.id for s in states], K, twin, [s.values for s in states],
+                                             settings)
+    yield from zip(states, opened, results)
 
 
 def residual_summary(report: dict) -> dict:

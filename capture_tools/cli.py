@@ -39,6 +39,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     a.add_argument("--charuco", default=None, metavar="SXxSY,SQUARE,MARKER[,DICT]",
                    help="a ChArUco board on the pedestal gives the metric scale, e.g. 5x7,0.04,0.03,DICT_5X5_100 "
                         "(squares, square and marker side in metres)")
+    a.add_argument("--sfm", choices=("per-state", "joint"), default=None,
+                   help="camera poses: one SfM per state, or one joint SfM over all states tied only by the "
+                        "static base (default: joint; docs/capture.md)")
     a.add_argument("--seed", type=int, default=0)
     a.add_argument("--overwrite", action="store_true")
     a.set_defaults(func=_assemble)
@@ -67,7 +70,7 @@ def _assemble(args) -> int:
     if args.views < 3:
         raise RsartError(f"--views must be at least 3, got {args.views}")
     s = CaptureSettings(n_views=args.views, chroma=ChromaSettings(grabcut=not args.no_grabcut), seed=args.seed,
-                        board=_board(args.charuco) if args.charuco else None)
+                        board=_board(args.charuco) if args.charuco else None, **({"sfm": args.sfm} if args.sfm else {}))
     rep = assemble(args.raw, args.twin, args.states, args.out, s, overwrite=args.overwrite)
     bad = [sid for sid, r in rep["states"].items() if r["registration"]["icp_fitness"] < 0.7]
     print(f"wrote {args.out}")

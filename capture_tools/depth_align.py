@@ -37,25 +37,44 @@ def _view_cloud(points: np.ndarray, voxel: float) -> tuple[np.ndarray, np.ndarra
 
 def refine_with_depth(c2w: dict[str, np.ndarray], intrinsics: Intrinsics, depths: dict[str, np.ndarray],
                       masks: dict[str, np.ndarray] | None, voxel: float = 0.003, rounds: int = 2,
-                      max_dist: float = 0.01, stride: int = 1) -> tuple[dict[str, np.ndarray], float]:
-    """Refined copy of ``c2w`` and the final median ICP inlier RMSE (metres) over the views."""
+                      max_dist: float = 0.01, stride: int = 1, groups: dict[str, str] | None = None,
+                      static: dict[str, np.ndarray] | None = None) -> tuple[dict[str, np.ndarray], float]:
+    """Refined copy of ``c2w`` and the final median ICP inlier RMSE (metres) over the views.
+
+    Joint mode (several states in one frame): ``groups`` (name -> state id) and ``static`` (name -> other
+    state id -> (H, W) mask of the pixels static with respect to that state) make a view's target its own state's object points plus only the *static*
+    points of the other states (movable parts are elsewhere there).
+    """
     names = [n for n in sorted(c2w) if n in depths]
     cur = dict(c2w)
     local = {n: _view_cloud(view_points(intrinsics, depths[n], None if masks is None else masks.get(n), np.eye(4),
                                         stride), voxel) for n in names}
     names = [n for n in names if len(local[n][0]) >= 100]
+    cache: dict[tuple[str, str], tuple[np.ndarray, np.ndarray]] = {}
+
+    def usable(m: str, n: str) -> tuple[np.ndarray, np.ndarray]:
+        """View m's local points and normals as a target for view n (only its static part across states)."""
+        if groups is None or static is None or groups[m] == groups[n]:
+            return local[m]
+        key = (m, groups[n])
+        if key not in cache:
+            sm = static.get(m, {}).get(groups[n])
+            pts = view_points(intrinsics, depths[m], sm, np.eye(4), stride) if sm is not None else np.zeros((0, 3))
+            cache[key] = _view_cloud(pts, voxel) if len(pts) >= 10 else (np.zeros((0, 3)), np.zeros((0, 3)))
+        return cache[key]
+
     reg_icp = o3d.pipelines.registration
     rmse: list[float] = []
     for _ in range(rounds):
-        world = {n: (local[n][0] @ cur[n][:3, :3].T + cur[n][:3, 3], local[n][1] @ cur[n][:3, :3].T) for n in names}
         rmse = []
         new = dict(cur)
         for n in names:
             # leave-one-out target: the other views' points and normals (a view matched to a fusion holding
             # itself would find its own points and stay put)
+            parts = [(usable(m, n), cur[m]) for m in names if m != n]
             target = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(
-                np.concatenate([world[m][0] for m in names if m != n])))
-            target.normals = o3d.utility.Vector3dVector(np.concatenate([world[m][1] for m in names if m != n]))
+                np.concatenate([p @ M[:3, :3].T + M[:3, 3] for (p, _), M in parts])))
+            target.normals = o3d.utility.Vector3dVector(np.concatenate([q @ M[:3, :3].T for (_, q), M in parts]))
             src = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(local[n][0]))
             reg = reg_icp.registration_icp(src, target, max_dist, cur[n],
                                            reg_icp.TransformationEstimationPointToPlane(),

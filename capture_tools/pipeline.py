@@ -29,7 +29,7 @@ from . import chroma
 from .board import BoardSpec, board_pose, board_scale
 from .depth_align import refine_with_depth, view_points
 from .readers import RawFrame, Recording
-from .register import Registration, pedestal_plane, register_twin, up_alignment
+from .register import Registration, pedestal_plane, register_twin, residual_of, up_alignment
 from .rgbd_ba import refine_rgbd
 from .select import score_frame, select_frames
 from .sfm import apply_scale, metric_scale, run_sfm
@@ -50,6 +50,7 @@ class CaptureSettings:
     seed: int = 0
     board: BoardSpec | None = None
     max_ba_reproj_px: float = 1.5
+    sfm: str = "joint"  # "per-state" | "joint" (capture_tools.joint)
 
 
 @dataclass
@@ -63,11 +64,20 @@ class StateResult:
     report: dict
 
 
-def process_state(rec: Recording, twin: Twin, values: dict[str, float],
-                  settings: CaptureSettings = CaptureSettings()) -> StateResult:
-    """Run steps 1-5 of the module docstring on one recording; raises :class:`RsartError` on failure."""
-    K = rec.intrinsics
-    # 1. scores (streamed)
+@dataclass
+class StateRecon:
+    """One state after steps 1-2: selected ``frames``, ``names`` (frame name -> SfM image name), ``keyed``
+    (frame name -> (H, W) bool chroma-key mask) and metric capture-frame poses ``c2w`` (image name -> (4, 4))."""
+
+    frames: list[RawFrame]
+    names: dict[str, str]
+    keyed: dict[str, np.ndarray]
+    c2w: dict[str, np.ndarray]
+    report: dict
+
+
+def select_state(rec: Recording, settings: CaptureSettings) -> tuple[list[RawFrame], dict[str, np.ndarray], int]:
+    """Step 1: (selected frames, frame name -> keyed mask, number of frames scored) from a streamed recording."""
     scores, packed = [], {}
     for f in rec:
         m = chroma.key_object(f.rgb, settings.chroma)
@@ -79,25 +89,31 @@ def process_state(rec: Recording, twin: Twin, values: dict[str, float],
         raise RsartError(f"{rec.source}: the recording has no depth stream (needed for scale and registration)")
     masks = {f.name: np.unpackbits(packed[f.index][0], count=int(np.prod(packed[f.index][1])))
              .reshape(packed[f.index][1]).astype(bool) for f in frames}
-    del packed
-    names = {f.name: f"{f.name}.png" for f in frames}
-    # 2. SfM + metric scale + refinements
+    return frames, masks, len(scores)
+
+
+def estimate_poses(images: dict[str, np.ndarray], K: Intrinsics, depths: dict[str, np.ndarray],
+                   keyed: dict[str, np.ndarray], settings: CaptureSettings, pair_filter=None,
+                   groups: dict[str, str] | None = None,
+                   static: dict[str, np.ndarray] | None = None) -> tuple[dict[str, np.ndarray], dict]:
+    """Step 2 on image name -> RGB / depth (m) / keyed mask: SfM, metric scale (depth or board), RGB-D BA,
+    leave-one-out depth ICP. ``pair_filter``, ``groups`` and ``static`` are the joint mode's
+    (capture_tools.joint): cross-state matches and cross-state depth restricted to the static base.
+    Returns (image name -> metric c2w in the SfM frame, figures)."""
     kern = np.ones((settings.feature_dilate_px, settings.feature_dilate_px), np.uint8)
-    feat_masks = {names[f.name]: cv2.dilate(masks[f.name].astype(np.uint8), kern) for f in frames}
-    sfm = run_sfm({names[f.name]: f.rgb for f in frames}, K, feat_masks, seed=settings.seed)
-    depths = {names[f.name]: f.depth for f in frames}
+    feat_masks = {n: cv2.dilate(m.astype(np.uint8), kern) for n, m in keyed.items()}
+    sfm = run_sfm(images, K, feat_masks, seed=settings.seed, pair_filter=pair_filter)
     scale, n_ratios = metric_scale(sfm, depths)
     extra: dict = {"depth_scale_factor": scale}
     if settings.board is not None:
-        seen = {names[f.name]: p for f in frames if (p := board_pose(f.rgb, K, settings.board)) is not None}
+        seen = {n: p for n, rgb in images.items() if (p := board_pose(rgb, K, settings.board)) is not None}
         if len(seen) >= 3:
             scale, _ = board_scale(sfm.c2w, seen)  # the board's metric scale replaces the depth sensor's
             extra.update(board_views=len(seen), board_scale_factor=scale)
         else:
             extra.update(board_views=len(seen), board_note="board seen in < 3 views: depth scale kept")
     sfm = apply_scale(sfm, scale)
-    report: dict = {**extra, "frames_total": len(scores), "frames_selected": len(frames),
-                    "sfm_registered": len(sfm.c2w), "sfm_reprojection_px": sfm.mean_reprojection_error,
+    report: dict = {**extra, "sfm_registered": len(sfm.c2w), "sfm_reprojection_px": sfm.mean_reprojection_error,
                     "metric_scale_ratios": n_ratios}
     if settings.rgbd_ba:
         refined, ba = refine_rgbd(sfm, K, depths)
@@ -107,14 +123,34 @@ def process_state(rec: Recording, twin: Twin, values: dict[str, float],
         if kept:
             sfm = refined
     c2w = dict(sfm.c2w)
-    obj_masks = {names[f.name]: masks[f.name] for f in frames}
     if settings.depth_icp:
-        c2w, icp_rmse = refine_with_depth(c2w, K, depths, obj_masks, voxel=settings.icp_voxel, stride=2)
+        c2w, icp_rmse = refine_with_depth(c2w, K, depths, keyed, voxel=settings.icp_voxel, stride=2,
+                                          groups=groups, static=static)
         report["depth_icp_rmse_m"] = icp_rmse
+    return c2w, report
+
+
+def reconstruct_state(rec: Recording, settings: CaptureSettings = CaptureSettings()) -> StateRecon:
+    """Steps 1-2 of the module docstring on one recording (its own SfM frame, metres)."""
+    frames, masks, n_total = select_state(rec, settings)
+    names = {f.name: f"{f.name}.png" for f in frames}
+    c2w, report = estimate_poses({names[f.name]: f.rgb for f in frames}, rec.intrinsics,
+                                 {names[f.name]: f.depth for f in frames},
+                                 {names[f.name]: masks[f.name] for f in frames}, settings)
+    report = {"frames_total": n_total, "frames_selected": len(frames), **report}
     frames = [f for f in frames if names[f.name] in c2w]
     if len(frames) < 3:
         raise RsartError(f"{rec.source}: SfM registered only {len(frames)} frames")
-    # 3. pedestal plane from background depth
+    return StateRecon(frames, names, masks, c2w, report)
+
+
+def place_state(recon: StateRecon, K: Intrinsics, twin: Twin, values: dict[str, float],
+                settings: CaptureSettings = CaptureSettings(), registration: Registration | None = None,
+                part_masks: bool = True) -> StateResult:
+    """Steps 3-5: pedestal plane, twin registration (or the given ``registration``), object-frame poses and
+    part masks (skipped, keyed masks returned, when ``part_masks`` is False)."""
+    frames, names, c2w, masks = recon.frames, recon.names, recon.c2w, dict(recon.keyed)
+    report = dict(recon.report)
     obj_pts = np.concatenate([view_points(K, f.depth, masks[f.name], c2w[names[f.name]], 2) for f in frames])
     bg_pts = np.concatenate([view_points(K, f.depth, ~masks[f.name], c2w[names[f.name]], 3) for f in frames])
     plane, n_in = pedestal_plane(bg_pts, obj_pts)
@@ -128,14 +164,22 @@ def process_state(rec: Recording, twin: Twin, values: dict[str, float],
         masks[f.name] = chroma.remove_plane(masks[f.name], f.depth, K, plane_cam)
     obj_pts = np.concatenate([view_points(K, f.depth, masks[f.name], c2w[names[f.name]], 2) for f in frames])
     # 4. twin registration
-    mesh = twin.whole_mesh(values)
-    reg = register_twin(mesh, obj_pts, up_T=up_T, seed=settings.seed)
+    reg = registration if registration is not None else register_twin(twin.whole_mesh(values), obj_pts, up_T=up_T,
+                                                                       seed=settings.seed)
+    if registration is not None:
+        reg = residual_of(twin.whole_mesh(values), obj_pts, registration.T, coarse_fitness=registration.coarse_fitness)
     report["registration"] = {k: v for k, v in reg.to_dict().items() if k != "T_world_to_capture"}
     Tinv = np.linalg.inv(reg.T)
     posed = {f.name: Tinv @ c2w[names[f.name]] for f in frames}
     # 5. part masks
-    part_masks = part_masks_from_twin(twin, values, K, posed, masks)
-    return StateResult(frames, posed, part_masks, reg, report)
+    out_masks = part_masks_from_twin(twin, values, K, posed, masks) if part_masks else masks
+    return StateResult(frames, posed, out_masks, reg, report)
+
+
+def process_state(rec: Recording, twin: Twin, values: dict[str, float],
+                  settings: CaptureSettings = CaptureSettings()) -> StateResult:
+    """Run steps 1-5 of the module docstring on one recording; raises :class:`RsartError` on failure."""
+    return place_state(reconstruct_state(rec, settings), rec.intrinsics, twin, values, settings)
 
 
 def part_masks_from_twin(twin: Twin, values: dict[str, float], K: Intrinsics, c2w: dict[str, np.ndarray],

@@ -145,12 +145,19 @@ def register_twin(mesh: trimesh.Trimesh, capture_points: np.ndarray, voxel: floa
             f = fit(r)
             if f > best_fit:
                 best, best_fit = r, f
-    T = best
-    # residual: capture points -> twin surface (the honest direction: every measured point must lie on the twin)
+    return residual_of(mesh, capture_points, best, voxel, float(coarse.fitness))
+
+
+def residual_of(mesh: trimesh.Trimesh, capture_points: np.ndarray, T: np.ndarray, voxel: float | None = None,
+                coarse_fitness: float = float("nan")) -> Registration:
+    """The :class:`Registration` of a given ``T`` (world -> capture): the RMS distance of the capture points
+    to the placed twin over the inliers (< ``voxel``/2, default 1/80 of the twin diagonal) and their fraction.
+    The honest direction: every measured point must lie on the twin."""
+    voxel = voxel or float(np.linalg.norm(mesh.extents)) / 40
     d = capture_residuals(mesh, capture_points, T)
     inl = d < voxel / 2
     rmse = float(np.sqrt(np.mean(d[inl] ** 2))) if inl.any() else float("inf")
-    return Registration(T, rmse, float(inl.mean()), float(coarse.fitness))
+    return Registration(np.asarray(T, float), rmse, float(inl.mean()), coarse_fitness)
 
 
 def outer_surface_samples(mesh: trimesh.Trimesh, n: int, seed: int = 0, rays: int = 8) -> tuple[np.ndarray, np.ndarray]:

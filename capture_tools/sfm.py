@@ -13,6 +13,7 @@ import shutil
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Callable
 
 import cv2
 import numpy as np
@@ -54,12 +55,15 @@ def _write_inputs(work: Path, images: dict[str, np.ndarray], masks: dict[str, np
 
 def run_sfm(images: dict[str, np.ndarray], intrinsics: Intrinsics, masks: dict[str, np.ndarray] | None = None,
             work_dir: str | Path | None = None, max_features: int = 4096, seed: int = 0,
-            threads: int = -1, peak_threshold: float = 0.004, dsp: bool = True) -> SfmResult:
+            threads: int = -1, peak_threshold: float = 0.004, dsp: bool = True,
+            pair_filter: PairFilter | None = None) -> SfmResult:
     """Incremental SfM on ``images`` (name -> (H, W, 3) uint8 RGB) with fixed pinhole ``intrinsics``.
 
     ``masks`` (name -> (H, W), non-zero = keep features) restrict SIFT to the object (a green booth
-    has no texture worth matching). Names must end in ``.png``. The largest model is returned; images it
-    did not register are absent from ``c2w``. Raises :class:`RsartError` when nothing reconstructs.
+    has no texture worth matching). Names must end in ``.png``. ``pair_filter`` may thin each verified
+    image pair's inlier matches before mapping (see :data:`PairFilter`). The largest model is returned;
+    images it did not register are absent from ``c2w``. Raises :class:`RsartError` when nothing
+    reconstructs.
     """
     import pycolmap
 
@@ -87,6 +91,8 @@ def run_sfm(images: dict[str, np.ndarray], intrinsics: Intrinsics, masks: dict[s
                                   camera_mode=pycolmap.CameraMode.SINGLE, reader_options=reader,
                                   extraction_options=ext, device=pycolmap.Device.cpu)
         pycolmap.match_exhaustive(db, device=pycolmap.Device.cpu)
+        if pair_filter is not None:
+            _filter_pairs(db, pair_filter)
         opts = pycolmap.IncrementalPipelineOptions()
         opts.ba_refine_focal_length = False
         opts.ba_refine_principal_point = False
@@ -102,6 +108,46 @@ def run_sfm(images: dict[str, np.ndarray], intrinsics: Intrinsics, masks: dict[s
     finally:
         if own:
             shutil.rmtree(work, ignore_errors=True)
+
+
+PairFilter = Callable[[str, str, np.ndarray, np.ndarray, np.ndarray], "np.ndarray | None"]
+"""``f(name1, name2, xy1 (N1, 2), xy2 (N2, 2), matches (M, 2) int)`` -> the rows of ``matches`` to keep
+(an index or boolean array), or None to keep the pair as it is. ``xy`` are the images' keypoints in rsart
+pixels; ``matches`` index them. A pair left with fewer than :data:`MIN_PAIR_MATCHES` matches is dropped."""
+
+MIN_PAIR_MATCHES = 15
+
+
+def _filter_pairs(db_path: Path, pair_filter: PairFilter) -> dict[str, int]:
+    """Apply ``pair_filter`` to every verified pair in the COLMAP database (in place); counts of pairs."""
+    import pycolmap
+
+    db = pycolmap.Database.open(str(db_path))
+    try:
+        names = {im.image_id: im.name for im in db.read_all_images()}
+        xy = {i: db.read_keypoints(i)[:, :2].astype(np.float64) - 0.5 for i in names}
+        counts = {"kept": 0, "thinned": 0, "dropped": 0}
+        pair_ids, geoms = db.read_two_view_geometries()
+        for pid, g in zip(pair_ids, geoms):
+            i1, i2 = pycolmap.pair_id_to_image_pair(pid)
+            m = np.asarray(g.inlier_matches)
+            if not len(m):
+                continue
+            keep = pair_filter(names[i1], names[i2], xy[i1], xy[i2], m)
+            if keep is None:
+                counts["kept"] += 1
+                continue
+            m2 = m[keep]
+            if len(m2) < MIN_PAIR_MATCHES:
+                db.delete_two_view_geometry(i1, i2)
+                counts["dropped"] += 1
+            else:
+                g.inlier_matches = np.ascontiguousarray(m2, dtype=m.dtype)
+                db.update_two_view_geometry(i1, i2, g)
+                counts["thinned"] += 1
+        return counts
+    finally:
+        db.close()
 
 
 def _result(rec) -> SfmResult:
