@@ -1,13 +1,15 @@
 """Differentiable 3D Gaussian rasterization: one API, three backends.
 
-``rasterize(...)`` projects Gaussians (``projection.py``, PyTorch autograd, shared), bins them
+``rasterize(...)`` projects Gaussians (``projection.py``, PyTorch autograd; the ``cpu`` backend
+uses the same arithmetic as a Numba kernel, ``projection_cpu.py``), bins them
 into 16x16 tiles sorted by depth, and composites front to back with the exact 3DGS rules:
 alpha = min(0.99, o * exp(-1/2 d^T Sigma'^-1 d)), entries with alpha < 1/255 skipped, a pixel
 stops before the Gaussian that would bring its transmittance below 1e-4, and Sigma' carries a
 0.3 px^2 low-pass dilation. Backends:
 
 * ``reference``: pure PyTorch, autograd gradients; the ground truth for tests.
-* ``cpu``: Numba kernels, hand-written backward, per-pixel early termination (default).
+* ``cpu``: Numba kernels for projection and compositing, hand-written backward passes,
+  per-pixel early termination (default).
 * ``gsplat``: gsplat's CUDA rasterizer (optional extra; needs CUDA).
 
 Conventions: see ``projection.py`` (OpenCV camera, integer pixel centres, quaternions (w,x,y,z),
@@ -96,7 +98,11 @@ def rasterize(
         from pd2gs.render.gsplat_backend import rasterize_gsplat
         return rasterize_gsplat(means, quats, scales, colors, opacities, K, w2c, width, height,
                                 background, labels, num_labels or 0, return_max_weight)
-    proj = project_gaussians(means, quats, scales, K, w2c, width, height)
+    if backend == "cpu":
+        from pd2gs.render.projection_cpu import project_gaussians_cpu
+        proj = project_gaussians_cpu(means, quats, scales, K, w2c, width, height)
+    else:
+        proj = project_gaussians(means, quats, scales, K, w2c, width, height)
     features = torch.cat([colors, proj.depths[:, None]], dim=1)
     if backend == "cpu":
         from pd2gs.render.cpu import bin_gaussians_cpu, rasterize_cpu
