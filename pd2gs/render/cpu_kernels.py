@@ -322,6 +322,7 @@ def backward_kernel(offsets, gids, prep, width, height, tiles_x, c, trans, last,
         s1 = carray(_stack(256, dt), (16, 16))
         s2 = carray(_stack(256, dt), (16, 16))
         s3 = carray(_stack(256, dt), (16, 16))
+        acc = carray(_stack(160, dt), (10, 16))
         for j in range(16):
             xs[j] = x0 + j
             ys[j] = y0 + j
@@ -361,7 +362,9 @@ def backward_kernel(offsets, gids, prep, width, height, tiles_x, c, trans, last,
             lo = max(np.int64(prep[g, P_YLO]) - y0, 0)
             hi = min(np.int64(prep[g, P_YHI]) - y0, TILE)
             kk = np.int32(k)
-            r0 = r1 = r2 = r3 = r4 = r5 = r6 = r7 = r8 = r9 = zero
+            for q in range(10):
+                for j in range(16):
+                    acc[q, j] = zero
             for r in range(lo, hi):
                 dy = ys[r] - my
                 cy = C * dy * dy
@@ -377,12 +380,13 @@ def backward_kernel(offsets, gids, prep, width, height, tiles_x, c, trans, last,
                     alpha = min(amax, raw)
                     good = (z <= zero) & (alpha >= amin) & (kk < lr[j])
                     om = one - alpha
+                    inv = one / om
                     tp = Tr[j]
-                    ti = tp / om if good else tp
+                    ti = tp * inv if good else tp
                     wt = alpha * ti if good else zero
                     dal = ti * (g0r[j] * (f0 - s0r[j]) + g1r[j] * (f1 - s1r[j])
                                 + g2r[j] * (f2 - s2r[j]) + g3r[j] * (f3 - s3r[j])) \
-                        - gtr[j] * tfr[j] / om
+                        - gtr[j] * tfr[j] * inv
                     dal = dal if good else zero
                     s0r[j] = alpha * f0 + om * s0r[j] if good else s0r[j]
                     s1r[j] = alpha * f1 + om * s1r[j] if good else s1r[j]
@@ -391,26 +395,22 @@ def backward_kernel(offsets, gids, prep, width, height, tiles_x, c, trans, last,
                     Tr[j] = ti
                     dgeo = dal if raw <= amax else zero
                     dpow = alpha * dgeo
-                    r0 += dpow * (ca * dx + cb * dy)
-                    r1 += dpow * (cb * dx + cc * dy)
-                    r2 += -half * dx * dx * dpow
-                    r3 += -dx * dy * dpow
-                    r4 += -half * dy * dy * dpow
-                    r5 += gauss * dgeo
-                    r6 += wt * g0r[j]
-                    r7 += wt * g1r[j]
-                    r8 += wt * g2r[j]
-                    r9 += wt * g3r[j]
-            pair_grad[k, 0] = r0
-            pair_grad[k, 1] = r1
-            pair_grad[k, 2] = r2
-            pair_grad[k, 3] = r3
-            pair_grad[k, 4] = r4
-            pair_grad[k, 5] = r5
-            pair_grad[k, 6] = r6
-            pair_grad[k, 7] = r7
-            pair_grad[k, 8] = r8
-            pair_grad[k, 9] = r9
+                    acc[0, j] += dpow * (ca * dx + cb * dy)
+                    acc[1, j] += dpow * (cb * dx + cc * dy)
+                    acc[2, j] += -half * dx * dx * dpow
+                    acc[3, j] += -dx * dy * dpow
+                    acc[4, j] += -half * dy * dy * dpow
+                    acc[5, j] += gauss * dgeo
+                    acc[6, j] += wt * g0r[j]
+                    acc[7, j] += wt * g1r[j]
+                    acc[8, j] += wt * g2r[j]
+                    acc[9, j] += wt * g3r[j]
+            if hi > lo:
+                for q in range(10):
+                    tot = zero
+                    for j in range(16):
+                        tot += acc[q, j]
+                    pair_grad[k, q] = tot
     return pair_grad
 
 
