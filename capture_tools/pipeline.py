@@ -51,6 +51,7 @@ class CaptureSettings:
     board: BoardSpec | None = None
     max_ba_reproj_px: float = 1.5
     sfm: str = "joint"  # "per-state" | "joint" (capture_tools.joint)
+    icp_band: float = 0.08  # depth ICP also uses the pedestal in a band this fraction of the image width wide
 
 
 @dataclass
@@ -124,10 +125,25 @@ def estimate_poses(images: dict[str, np.ndarray], K: Intrinsics, depths: dict[st
             sfm = refined
     c2w = dict(sfm.c2w)
     if settings.depth_icp:
-        c2w, icp_rmse = refine_with_depth(c2w, K, depths, keyed, voxel=settings.icp_voxel, stride=2,
+        band_px = int(round(settings.icp_band * K.width))
+        icp_masks = {n: icp_band(m, depths[n], band_px) for n, m in keyed.items()}
+        c2w, icp_rmse = refine_with_depth(c2w, K, depths, icp_masks, voxel=settings.icp_voxel, stride=2,
                                           groups=groups, static=static)
         report["depth_icp_rmse_m"] = icp_rmse
     return c2w, report
+
+
+def icp_band(keyed: np.ndarray, depth: np.ndarray, band_px: int) -> np.ndarray:
+    """(H, W) bool: the object mask grown by ``band_px`` pixels, keeping only depth no further than the object's
+    farthest point + 10 %: the pedestal top around the object (static and flat, seen from every side), not
+    the booth walls behind it."""
+    if band_px <= 0:
+        return keyed
+    grown = cv2.dilate(keyed.astype(np.uint8), np.ones((2 * band_px + 1, 2 * band_px + 1), np.uint8)).astype(bool)
+    obj = depth[keyed & (depth > 0)]
+    if not len(obj):
+        return keyed
+    return keyed | (grown & (depth > 0) & (depth < 1.1 * float(np.percentile(obj, 99))))
 
 
 def reconstruct_state(rec: Recording, settings: CaptureSettings = CaptureSettings()) -> StateRecon:
