@@ -62,7 +62,21 @@ class DeformMLP(nn.Module):
         nn.init.zeros_(self.head.bias)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """(N, d_in) full inputs [PE, q, log s, latent] -> (N, 10)."""
         return self.head(self.body(x))
+
+    def forward_split(self, feat: torch.Tensor, latent: torch.Tensor) -> torch.Tensor:
+        """``forward(cat([feat, latent.expand(N, -1)], 1))`` for (N, d_in - D) per-Gaussian
+        features and one (D,) latent, without materialising the repeated latent: its share of
+        the first layer is a per-state bias (same parameters; ~15% fewer FLOPs and no (N, D)
+        gradient)."""
+        first = self.body[0]
+        d = feat.shape[1]
+        bias = torch.addmv(first.bias, first.weight[:, d:], latent)
+        h = torch.relu(torch.addmm(bias, feat, first.weight[:, :d].T))
+        for layer in self.body[2:]:
+            h = layer(h)
+        return self.head(h)
 
 
 @dataclass
@@ -94,13 +108,17 @@ class DeformableField(nn.Module):
         """(D,) latent (1 - t) alpha_k0 + t alpha_k1 (t = 0 gives state k0)."""
         return (1 - t) * self.latents[k0] + t * self.latents[k1]
 
-    def offsets(self, latent: torch.Tensor) -> torch.Tensor:
-        """(N, 10) raw network outputs for every canonical Gaussian."""
+    def features(self) -> torch.Tensor:
+        """(N, 3 + 6 * pe_freqs + 7) per-Gaussian network inputs [PE(mu), q / |q|, log s]."""
         g = self.gaussians
         q = g.quats / g.quats.norm(dim=-1, keepdim=True)
-        x = torch.cat([positional_encoding((g.means - self.center) / self.extent, self.mlp.cfg.pe_freqs),
-                       q, g.log_scales, latent.expand(g.num, -1)], dim=1)
-        return self.mlp(x)
+        return torch.cat([positional_encoding((g.means - self.center) / self.extent, self.mlp.cfg.pe_freqs),
+                          q, g.log_scales], dim=1)
+
+    def offsets(self, latent: torch.Tensor, features: torch.Tensor | None = None) -> torch.Tensor:
+        """(N, 10) raw network outputs for every canonical Gaussian (the network on
+        [features, latent]; pass ``features()`` to reuse them across latents)."""
+        return self.mlp.forward_split(self.features() if features is None else features, latent)
 
     def deform(self, latent: torch.Tensor, mask: torch.Tensor | None = None,
                base_latent: torch.Tensor | None = None) -> DeformedGaussians:
@@ -109,9 +127,10 @@ class DeformableField(nn.Module):
         Part-level control: with ``mask`` (N,) bool, only the masked Gaussians follow ``latent``;
         the others follow ``base_latent`` (or stay canonical if it is None).
         """
-        out = self.offsets(latent)
+        feat = self.features()
+        out = self.offsets(latent, feat)
         if mask is not None:
-            base = self.offsets(base_latent) if base_latent is not None else torch.zeros_like(out)
+            base = self.offsets(base_latent, feat) if base_latent is not None else torch.zeros_like(out)
             out = torch.where(mask[:, None], out, base)
         g = self.gaussians
         dq = out[:, 3:7] + torch.tensor([1.0, 0.0, 0.0, 0.0])
