@@ -30,8 +30,9 @@ class DensifyStats:
         """Accumulate one view's (N, 2) pixel-space gradient of the projected means."""
         g = means2d_grad * torch.tensor([0.5 * width, 0.5 * height])
         vis = radii > 0
-        self.grad_sum[vis] += g[vis].norm(dim=-1)
-        self.count[vis] += 1
+        # dense masked adds (boolean-index scatter is ~10x slower on 20k Gaussians)
+        self.grad_sum += torch.where(vis, g.norm(dim=-1), 0.0)
+        self.count += vis
 
 
 def _replace(opt: torch.optim.Optimizer, model: CanonicalGaussians, keep: torch.Tensor,
