@@ -7,7 +7,8 @@ API (docs/leaderboard.md):
   bad token), 411 (no Content-Length), 413 (too large), 422 (unsafe archive or invalid submission, with
   ``problems`` listing each JSON path), 429 (rate limit; ``Retry-After``).
 * ``GET /api/jobs/{id}`` — ``queued | running | done | failed`` (+ ``error`` / ``submission_id``).
-* ``GET /api/leaderboard`` — computed rows as JSON; ``GET /api/version`` — counts the live page polls.
+* ``GET /api/leaderboard`` — computed rows as JSON; ``GET /api/version`` — counts and a ``key`` the live
+  page polls; it reloads when the key differs from the one stamped into it (``<meta name=rsart-live-version>``).
 * ``GET /`` — the live leaderboard (same tables as the static site; reloads when a new score lands).
 
 Uploads are written atomically (temp + rename) under ``<work>/``; the queue is the database's ``jobs``
@@ -29,19 +30,33 @@ from fastapi.responses import HTMLResponse, JSONResponse
 
 from . import jobs as J
 from .archive import ArchiveError, ArchiveLimits, extract_zip, find_submission_file
-from .html import page
+from .html import esc, page
 from .schema import MEAN, open_engine
 from .store import count_submissions, list_submissions
 from .worker import ScoringSettings
 
 UPLOAD_PATH = "/api/submissions"
 
+#: The live page's version stamp: ``<meta name="rsart-live-version" content="KEY">``, KEY as in /api/version.
+VERSION_META = "rsart-live-version"
+
+# The live page polls api/version and reloads when the key differs from the one the server stamped into the
+# page when it rendered it. (Taking the baseline from the first poll instead loses every score that lands
+# between the render and that poll: the page then never reloads.)
 LIVE_JS = """
-(function(){var n=0,seen=null;function tick(){if(++n>2400)return;fetch('api/version',{cache:'no-store'})
-.then(function(r){return r.json();}).then(function(v){var k=v.submissions+':'+v.done;if(seen===null)seen=k;
-else if(k!==seen){location.reload();return;}setTimeout(tick,1500);}).catch(function(){setTimeout(tick,3000);});}
-setTimeout(tick,1500);})();
-"""
+(function(){var m=document.querySelector('meta[name=%s]'),seen=m?m.getAttribute('content'):null,n=0;
+function tick(){if(++n>2400)return;fetch('api/version',{cache:'no-store'}).then(function(r){return r.json();})
+.then(function(v){if(v.key!==seen){location.reload();return;}setTimeout(tick,1500);})
+.catch(function(){setTimeout(tick,3000);});}setTimeout(tick,1500);})();
+""" % VERSION_META
+
+
+def live_version(engine) -> dict:
+    """What the live page polls: scored submissions, done jobs, the queue, and ``key`` (changes whenever a
+    scored submission lands)."""
+    q = J.queue_counts(engine)
+    n, done = count_submissions(engine), q.get("done", 0)
+    return {"submissions": n, "done": done, "queue": q, "key": f"{n}:{done}"}
 
 
 @dataclass(frozen=True)
@@ -168,8 +183,7 @@ def create_app(cfg: ServerConfig) -> FastAPI:
 
     @app.get("/api/version")
     def version():
-        q = J.queue_counts(engine)
-        return {"submissions": count_submissions(engine), "done": q.get("done", 0), "queue": q}
+        return live_version(engine)
 
     @app.get("/api/leaderboard")
     def leaderboard():
@@ -183,10 +197,14 @@ def create_app(cfg: ServerConfig) -> FastAPI:
     def live():
         from .exports import index_body
 
+        # stamp first, then read: a score landing in between is shown and then costs one extra reload,
+        # never a missed one
+        stamp = live_version(engine)["key"]
         body = ('<p class="note">Live page: reloads when a new submission is scored. Upload: '
                 '<code>curl -H "Authorization: Bearer $TOKEN" -F archive=@sub.zip HOST/api/submissions</code>.</p>'
                 + index_body(engine, list_submissions(engine)))
-        return page("rsart leaderboard (live)", body, extra_js=LIVE_JS)
+        head = f'<meta name="{VERSION_META}" content="{esc(stamp)}">'
+        return page("rsart leaderboard (live)", body, extra_head=head, extra_js=LIVE_JS)
 
     @app.get("/published.html", response_class=HTMLResponse)
     def published():
