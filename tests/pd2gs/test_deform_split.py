@@ -17,7 +17,7 @@ def test_forward_split_equals_forward_on_concatenated_input():
     feat = torch.randn(n, d, dtype=torch.float64, requires_grad=True)
     latent = torch.randn(cfg.latent_dim, dtype=torch.float64, requires_grad=True)
     w = torch.randn(n, 10, dtype=torch.float64)
-    split = mlp.forward_split(feat, latent)
+    split = mlp.forward_split(feat, latent, chunk=128)  # three chunks, the last one partial
     full = mlp(torch.cat([feat, latent.expand(n, -1)], dim=1))
     assert torch.allclose(split, full, rtol=0, atol=1e-12)
     params = [feat, latent] + list(mlp.parameters())
