@@ -6,8 +6,9 @@ are and restricts *cross-state* matches to points measured on the static base:
 
 1. each state is reconstructed on its own (:func:`capture_tools.pipeline.reconstruct_state`) and the twin
    registered to it, which places every state's capture frame relative to the first state's
-   (twin_0 · twin_k⁻¹); an ICP of state k's fused object depth onto state 0's, with a short reach,
-   refines that from the parts that did not move;
+   (twin_0 · twin_k⁻¹; measured 0.2° and 4 mm off on the simulated captures). An ICP of the states'
+   fused depths onto each other was tried and made this worse (0.3°, 6 mm): the planes a moved part
+   leaves behind (a closed lid's top 2 cm above the body top it uncovers) pull each other;
 2. a pixel of a view of state k is *static with respect to state j* when its depth point, in the common
    frame, lies within ``tol`` of state j's fused object depth (:func:`static_masks`) -- a moved part
    finds nothing there, a base point finds itself. No twin part labels are used: on a real capture they
@@ -50,22 +51,6 @@ def fused_points(recon: StateRecon, K: Intrinsics, stride: int = 2, voxel: float
                           for f in recon.frames])
     pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts)).voxel_down_sample(voxel)
     return np.asarray(pc.points)
-
-
-def align_states(clouds: list[np.ndarray], init: list[np.ndarray], reach: tuple[float, ...] = (0.01, 0.004)) -> list[np.ndarray]:
-    """(4, 4) transforms state k capture frame -> state 0 capture frame: ``init[k]`` refined by point-to-plane
-    ICP of cloud k onto cloud 0 with short ``reach`` (m), so moved parts find no partner and drop out."""
-    reg = o3d.pipelines.registration
-    target = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(clouds[0]))
-    target.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=0.01, max_nn=30))
-    out = [np.eye(4)]
-    for cloud, T in zip(clouds[1:], init[1:]):
-        src = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(cloud))
-        for r in reach:
-            T = np.asarray(reg.registration_icp(src, target, r, T, reg.TransformationEstimationPointToPlane(),
-                                                reg.ICPConvergenceCriteria(max_iteration=50)).transformation)
-        out.append(T)
-    return out
 
 
 def static_masks(recons: list[StateRecon], ids: list[str], to_ref: list[np.ndarray], clouds: list[np.ndarray],
@@ -160,7 +145,7 @@ def process_joint(recons: list[StateRecon], ids: list[str], K: Intrinsics, twin:
     per_state = [place_state(rc, K, twin, v, settings, part_masks=False) for rc, v in zip(recons, values)]
     Ts = [r.registration.T for r in per_state]
     clouds = [fused_points(rc, K) for rc in recons]
-    to_ref = align_states(clouds, [Ts[0] @ np.linalg.inv(T) for T in Ts])
+    to_ref = [Ts[0] @ np.linalg.inv(T) for T in Ts]
     static = static_masks(recons, ids, to_ref, clouds, K)
     groups = {rc.names[f.name]: sid for rc, sid in zip(recons, ids) for f in rc.frames}
     images = {rc.names[f.name]: f.rgb for rc in recons for f in rc.frames}

@@ -20,10 +20,9 @@ from rsart.io import read_mask_png
 
 pytestmark = pytest.mark.slow
 
-ROT_TARGET_DEG = 0.5      # the issue's targets, on the median over every view of the capture
+ROT_TARGET_DEG = 0.5      # the issue's targets, held per state (median over the state's views, Sim(3))
 TRANS_TARGET_M = 0.005
-ROT_STATE_DEG = 0.7       # per state (the open state m3 alone sits at 0.47-0.51 deg: docs/capture.md)
-TRANS_STATE_M = 0.007
+ONE_FRAME_TRANS_M = 0.0065  # joint mode: one Sim(3) for all states' cameras (measured 5.1-5.3 mm; docs/capture.md)
 
 
 @pytest.fixture
@@ -59,12 +58,30 @@ def check_state(out, truth, sid):
     return pose_errors(E, G, "sim3"), pose_errors(E, G, "none"), np.array(iou), np.array(acc)
 
 
+def poses_of(out, truth, states) -> tuple[np.ndarray, np.ndarray]:
+    """(estimated, true) (N, 4, 4) camera-to-world of the given states' assembled views."""
+    E, G = [], []
+    for sid in states:
+        ref = read_cameras(truth / "states" / sid / "cameras.json")
+        for v in read_cameras(out / "states" / sid / "cameras.json").views:
+            E.append(v.c2w)
+            G.append(ref.views[int(v.extra["frame"])].c2w)
+    return np.array(E), np.array(G)
+
+
 def test_frames_layout_end_to_end(sim_capture, tmp_path):
     raw = tmp_path / "raw"
     write_raw_capture(sim_capture, raw, "frames")
     assert not list(raw.rglob("cameras.json")) and not list(raw.rglob("mask"))  # poses and masks withheld
     out = tmp_path / "obj"
-    report = assemble(raw, sim_capture, None, out, CaptureSettings(n_views=24), progress=lambda *_: None)
+    report = assemble(raw, sim_capture, None, out, CaptureSettings(n_views=24, sfm="joint"), progress=lambda *_: None)
+    joint = report["joint"]
+    assert joint["used"] and joint["registered_per_state"] == {"m0": 24, "m3": 24}
+    # only the static base ties the states: neither none nor all of a state's object pixels (measured ~0.4 of the
+    # closed cabinet, whose lid top moves, and ~0.3 of the open one, whose uncovered body top m0 never saw)
+    assert all(0.15 < f < 0.7 for f in joint["static_fraction"].values()), joint["static_fraction"]
+    # one frame: the same twin placement for every state
+    np.testing.assert_allclose(report["states"]["m0"]["T_world_to_capture"], report["states"]["m3"]["T_world_to_capture"])
     meta = read_meta(out)
     truth_meta = read_meta(sim_capture)
     assert [(s.id, s.kind, s.values) for s in meta.states] == [(s.id, s.kind, s.values) for s in truth_meta.states
@@ -73,22 +90,19 @@ def test_frames_layout_end_to_end(sim_capture, tmp_path):
     assert (out / "twin" / "object.urdf").is_file() and all((out / p.mesh).is_file() for p in meta.parts)
     from rsart.cli import main
     assert main(["validate", str(out)]) == 0
-    rot, trans = [], []
     for sid in ("m0", "m3"):
         sim3, frame, iou, acc = check_state(out, sim_capture, sid)
         reg = report["states"][sid]["registration"]
         print(f"\n[{sid}] Sim(3): {sim3.to_dict()}\n[{sid}] object frame: {frame.to_dict()}\n"
               f"[{sid}] mask IoU mean {iou.mean():.4f} min {iou.min():.4f}, part labels {acc.mean():.4f}; "
               f"twin residual {1000 * reg['icp_rmse']:.2f} mm fitness {reg['icp_fitness']:.3f}")
-        rot.append(sim3.rot_deg)
-        trans.append(sim3.trans)
-        assert sim3.median_rot_deg < ROT_STATE_DEG and sim3.median_trans < TRANS_STATE_M
+        assert sim3.median_rot_deg < ROT_TARGET_DEG and sim3.median_trans < TRANS_TARGET_M
         assert frame.median_rot_deg < 1.0 and frame.median_trans < 0.012  # registration adds a few mm
         assert iou.mean() >= 0.98 and acc.mean() >= 0.98
         assert reg["icp_rmse"] < 0.005 and reg["icp_fitness"] > 0.7
-    rot, trans = np.concatenate(rot), np.concatenate(trans)
-    print(f"capture median (Sim(3) per state): {np.median(rot):.3f} deg, {1000 * np.median(trans):.2f} mm")
-    assert np.median(rot) < ROT_TARGET_DEG and np.median(trans) < TRANS_TARGET_M
+    one = pose_errors(*poses_of(out, sim_capture, ("m0", "m3")), "sim3")
+    print(f"one Sim(3) for both states: {one.to_dict()}")
+    assert one.median_rot_deg < ROT_TARGET_DEG and one.median_trans < ONE_FRAME_TRANS_M
     rep = json.loads((out / "capture.json").read_text())
     assert set(rep["states"]) == {"m0", "m3"}
 
@@ -101,12 +115,13 @@ def test_video_layout_via_cli(sim_capture, tmp_path, capture_plugin, capsys):
     assert (raw / "m3" / "color.mkv").is_file()  # FFV1, lossless (docs/capture.md has the MJPG figures)
     out = tmp_path / "obj"
     code = main(["capture", "assemble", str(raw), "--twin", str(sim_capture / "twin" / "object.urdf"),
-                 "--out", str(out), "--views", "24"])
+                 "--out", str(out), "--views", "24", "--sfm", "per-state"])
     assert code == 0, capsys.readouterr()
     sim3, frame, iou, acc = check_state(out, sim_capture, "m3")
     print(f"\n[video m3] Sim(3): {sim3.to_dict()}\n[video m3] object frame: {frame.to_dict()}\n"
           f"[video m3] mask IoU {iou.mean():.4f}, part labels {acc.mean():.4f}")
-    assert sim3.median_rot_deg < ROT_STATE_DEG and sim3.median_trans < TRANS_STATE_M
+    assert sim3.median_rot_deg < ROT_TARGET_DEG and sim3.median_trans < TRANS_TARGET_M
+    assert json.loads((out / "capture.json").read_text())["settings"]["sfm"] == "per-state"
     assert frame.median_rot_deg < 1.0 and frame.median_trans < 0.012
     assert iou.mean() >= 0.98
     # refusing to overwrite, and a bad capture log, exit 2 without a traceback
