@@ -22,15 +22,22 @@ from pathlib import Path
 
 import torch
 
+from pd2gs.losses import photometric_loss, psnr
+from pd2gs.render import rasterize
 from pd2gs.synthetic import make_frames
 from pd2gs.train import TrainConfig, Trainer
 
 
-def step_speed(size: int, n: int, steps: int, backend: str) -> dict:
+def _trainer(size: int, n: int, backend: str) -> Trainer:
     frames = make_frames(views=8, size=(size, size), n_gaussians=4000)
     cfg = TrainConfig(states=["a", "b", "c", "d"], size=(size, size), iters=10**6, init_points=n,
                       densify_from=10**7, opacity_reset_every=0, backend=backend)
-    tr = Trainer(cfg, frames)
+    return Trainer(cfg, frames)
+
+
+def step_speed(size: int, n: int, steps: int, backend: str) -> dict:
+    """Median wall and process-CPU time of ``Trainer.step`` (the real training step)."""
+    tr = _trainer(size, n, backend)
     for _ in range(3):
         tr.step()
     wall, cpu = [], []
@@ -41,8 +48,68 @@ def step_speed(size: int, n: int, steps: int, backend: str) -> dict:
         cpu.append(time.process_time() - c0)
     med = statistics.median(wall)
     return {"size": size, "gaussians": n, "backend": backend, "median_ms": 1e3 * med,
-            "it_per_s": 1 / med, "cpu_ms_per_step": 1e3 * statistics.median(cpu),
-            "mlp": asdict(cfg.deform)}
+            "min_ms": 1e3 * min(wall), "it_per_s": 1 / med,
+            "cpu_ms_per_step": 1e3 * statistics.median(cpu), "loadavg": os.getloadavg(),
+            "mlp": asdict(tr.cfg.deform)}
+
+
+def step_breakdown(size: int, n: int, steps: int, backend: str) -> dict:
+    """Process-CPU ms per phase of a training step rebuilt from the public pieces (deform,
+    rasterize, loss, backward, Adam, density statistics, quaternion renormalisation), plus the
+    Adam step with ``fused=True`` as a candidate for ``train.make_optimizer``. Medians over
+    ``steps``; the phases run in the order of ``Trainer.step`` (without the lead's optional
+    regularisers)."""
+    tr = _trainer(size, n, backend)
+    fld, cfg = tr.field, tr.cfg
+    fused = torch.optim.Adam([{**{k: v for k, v in g.items() if k != "params"},
+                               "params": [p.detach().clone().requires_grad_() for p in g["params"]]}
+                              for g in tr.opt.param_groups], eps=1e-15, fused=True)
+    phases: dict[str, list[float]] = {}
+
+    def lap(name: str, t0: float) -> float:
+        t1 = time.process_time()
+        phases.setdefault(name, []).append(1e3 * (t1 - t0))
+        return t1
+
+    for i in range(steps + 3):
+        frame = tr._next_frame()
+        t = time.process_time()
+        d = fld.deform(fld.latent(frame.state))
+        g = fld.gaussians
+        scales, colors, opac = d.log_scales.exp(), g.colors, g.opacities
+        t = lap("deform_forward", t)
+        w, h = frame.size
+        out = rasterize(d.means, d.quats, scales, colors, opac, frame.K, frame.w2c, w, h,
+                        background=torch.tensor(cfg.background), backend=backend)
+        out.means2d.retain_grad()
+        t = lap("rasterize_forward", t)
+        loss = photometric_loss(out.rgb, frame.rgb, cfg.lambda_dssim)
+        t = lap("loss_forward", t)
+        tr.opt.zero_grad(set_to_none=True)
+        loss.backward()
+        t = lap("backward_all", t)
+        tr.stats.add(out.means2d.grad, out.radii, *frame.size)
+        t = lap("densify_stats", t)
+        tr.opt.step()
+        t = lap("adam_step", t)
+        with torch.no_grad():
+            q = g.quats
+            q /= q.norm(dim=-1, keepdim=True)
+        t = lap("quat_renorm", t)
+        info = (float(loss.detach()), psnr(out.rgb, frame.rgb))
+        t = lap("loss_item_and_psnr", t)
+        for p_src, p_dst in zip([p for grp in tr.opt.param_groups for p in grp["params"]],
+                                [p for grp in fused.param_groups for p in grp["params"]]):
+            p_dst.grad = p_src.grad
+        t = time.process_time()
+        fused.step()
+        lap("adam_step_fused_candidate", t)
+        del info
+    res = {k: statistics.median(v[3:]) for k, v in phases.items()}
+    res["total_measured_excluding_candidate"] = sum(v for k, v in res.items()
+                                                     if k != "adam_step_fused_candidate")
+    return {"size": size, "gaussians": n, "backend": backend, "cpu_ms": res,
+            "loadavg": os.getloadavg()}
 
 
 def full_run(object_dir: str, iters: int | None, run_dir: str | None) -> dict:
@@ -72,6 +139,7 @@ def main() -> None:
     ap.add_argument("--iters", type=int, default=None, help="override iterations of the full run")
     ap.add_argument("--run-dir", default=None, help="keep the full run's folder here (for pd2gs eval)")
     ap.add_argument("--skip-steps", action="store_true", help="only the full run")
+    ap.add_argument("--breakdown", action="store_true", help="also time each phase of a step")
     ap.add_argument("--out", default="benchmarks/results/pd2gs_train.json")
     args = ap.parse_args()
     rows = []
@@ -81,17 +149,27 @@ def main() -> None:
             rows.append(row)
             print(f"{size}x{size} N={n}: {row['it_per_s']:.1f} it/s ({row['median_ms']:.0f} ms, "
                   f"cpu {row['cpu_ms_per_step']:.0f} ms)", flush=True)
-    result = {"benchmark": "pd2gs_train", "steps": rows, "loadavg_at_end": os.getloadavg(),
-              "torch": torch.__version__, "cpus": os.cpu_count(),
-              "note": "wall clock on a box shared with other jobs; cpu_ms_per_step is process CPU time"}
+    out = Path(args.out)
+    # keep earlier sections (e.g. a full run measured separately) unless this run replaces them
+    result = json.loads(out.read_text()) if out.is_file() else {}
+    result.update({"benchmark": "pd2gs_train", "steps": rows, "loadavg_at_end": os.getloadavg(),
+                   "torch": torch.__version__, "cpus": os.cpu_count(),
+                   "note": "wall clock on a box shared with other jobs; cpu_ms_per_step is process CPU "
+                           "time; loadavg per row"})
+    if args.breakdown and not args.skip_steps:
+        result["step_breakdown"] = [step_breakdown(size, n, args.steps, args.backend)
+                                    for size in map(int, args.sizes.split(","))
+                                    for n in map(int, args.counts.split(","))]
+        for b in result["step_breakdown"]:
+            print(b["size"], b["gaussians"], json.dumps({k: round(v, 1) for k, v in b["cpu_ms"].items()}))
     if args.object:
         result["full_run"] = full_run(args.object, args.iters, args.run_dir)
         print(json.dumps(result["full_run"], indent=1))
         result["loadavg_at_end"] = os.getloadavg()
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(args.out).with_suffix(".tmp")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_suffix(".tmp")
     tmp.write_text(json.dumps(result, indent=2))
-    tmp.replace(args.out)
+    tmp.replace(out)
     print("wrote", args.out)
 
 
