@@ -80,6 +80,7 @@ def test_static_site_sorts(browser, scored, tmp_path):
 
 
 def test_live_page_shows_a_newly_scored_method(browser, one_object, tmp_path):
+    from selenium.common.exceptions import StaleElementReferenceException
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support.ui import WebDriverWait
 
@@ -95,7 +96,8 @@ def test_live_page_shows_a_newly_scored_method(browser, one_object, tmp_path):
         job = r.json()["job_id"]
         assert srv.wait_jobs([job])[job]["status"] == "done"
         # scored (usually within the page's first 1.5 s poll interval: issue 11); the page must reload itself
-        WebDriverWait(browser, 30, poll_frequency=0.5).until(
+        # the reload can replace <body> between find_element and .text: poll again then
+        WebDriverWait(browser, 30, poll_frequency=0.5, ignored_exceptions=[StaleElementReferenceException]).until(
             lambda d: "browser-new-method" in d.find_element(By.TAG_NAME, "body").text)
         ARTIFACTS.mkdir(exist_ok=True)
         browser.save_screenshot(str(ARTIFACTS / "leaderboard_live.png"))
