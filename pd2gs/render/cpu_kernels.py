@@ -212,6 +212,7 @@ def forward_kernel(offsets, gids, prep, width, height, tiles_x, c, labels, lw_ou
         a3 = carray(_stack(256, dt), (16, 16))
         wb = carray(_stack(256, dt), (16, 16))
         lst = carray(_stack(256, np.int32), (16, 16))
+        row_alive = carray(_stack(16, dt), 16)
         lw = np.zeros((max(n_lab, 1), 16, 16), dt)
         for j in range(16):
             xs[j] = x0 + j
@@ -226,13 +227,18 @@ def forward_kernel(offsets, gids, prep, width, height, tiles_x, c, labels, lw_ou
                 wb[r, j] = zero
                 lst[r, j] = 0
                 act[r, j] = one if (x0 + j < width and y0 + r < height) else zero
+        for r in range(16):
+            row_alive[r] = one
         for k in range(start, end):
-            if (k - start) % 32 == 31:
+            if (k - start) % 32 == 31:  # refresh which rows still have unterminated pixels
                 alive = zero
                 for r in range(16):
                     ar = act[r]
+                    acc_r = zero
                     for j in range(16):
-                        alive += ar[j]
+                        acc_r += ar[j]
+                    row_alive[r] = acc_r
+                    alive += acc_r
                 if alive == zero:
                     break
             g = gids[k]
@@ -243,6 +249,10 @@ def forward_kernel(offsets, gids, prep, width, height, tiles_x, c, labels, lw_ou
             hi = min(np.int64(prep[g, P_YHI]) - y0, TILE)
             kk = np.int32(k + 1)
             for r in range(lo, hi):
+                if row_alive[r] == zero:  # every pixel of the row has terminated: w = 0
+                    for j in range(16):
+                        wb[r, j] = zero
+                    continue
                 dy = ys[r] - my
                 cy = C * dy * dy
                 by = B * dy
@@ -323,6 +333,7 @@ def backward_kernel(offsets, gids, prep, width, height, tiles_x, c, trans, last,
         s2 = carray(_stack(256, dt), (16, 16))
         s3 = carray(_stack(256, dt), (16, 16))
         acc = carray(_stack(160, dt), (10, 16))
+        row_last = carray(_stack(16, np.int32), 16)
         for j in range(16):
             xs[j] = x0 + j
             ys[j] = y0 + j
@@ -353,6 +364,11 @@ def backward_kernel(offsets, gids, prep, width, height, tiles_x, c, trans, last,
                     g1[r, j] = zero
                     g2[r, j] = zero
                     g3[r, j] = zero
+        for r in range(16):
+            m = np.int32(0)
+            for j in range(16):
+                m = max(m, lst[r, j])
+            row_last[r] = m
         for k in range(kmax - 1, start - 1, -1):
             g = gids[k]
             mx, my = prep[g, P_MX], prep[g, P_MY]
@@ -366,6 +382,8 @@ def backward_kernel(offsets, gids, prep, width, height, tiles_x, c, trans, last,
                 for j in range(16):
                     acc[q, j] = zero
             for r in range(lo, hi):
+                if kk >= row_last[r]:  # no pixel of the row composited entry k or an earlier one
+                    continue
                 dy = ys[r] - my
                 cy = C * dy * dy
                 by = B * dy
