@@ -72,3 +72,33 @@ def test_unseen_state_is_scored_by_latent_interpolation(frames):
     res = eval_unseen(tr.field, unseen, tr.cfg.background, steps=3)
     assert res["segment"] == [0, 1] and res["t"] in (0.0, 0.5, 1.0)
     assert res["views"] == {"fit": 2, "scored": 2} and 5 < res["psnr"] < 60
+
+
+def test_curriculum_adds_states_in_order_from_their_predecessor(frames):
+    cfg = tiny_config(40)
+    cfg.curriculum, cfg.curriculum_frac = True, 0.5
+    tr = Trainer(cfg, frames)
+    assert [tr.join_iteration(k) for k in range(2)] == [0, 20]
+    seen = set()
+    for _ in range(20):
+        seen.add(tr._next_frame().state)
+        tr.iteration += 1
+    assert seen == {0}  # only the first state before the second joins
+    before = tr.field.latents[0].detach().clone()
+    tr._next_frame()  # iteration 20: state 1 joins, starting from state 0's latent
+    assert torch.equal(tr.field.latents[1].detach(), before)
+    seen = {tr._next_frame().state for _ in range(12)}
+    assert seen == {0, 1}
+
+
+def test_scale_regulariser_keeps_per_state_scales(frames):
+    def scale_drift(weight):
+        cfg = tiny_config(40)
+        cfg.scale_reg_weight = weight
+        tr = Trainer(cfg, frames)
+        for _ in range(40):
+            tr.step()
+        with torch.no_grad():
+            d = tr.field.deform(tr.field.latent(1))
+            return float((d.log_scales - tr.field.gaussians.log_scales).abs().mean())
+    assert scale_drift(10.0) < 0.5 * scale_drift(0.0)

@@ -1,0 +1,208 @@
+"""Benchmark: PD²GS on the rsart-synth suite at the default CPU settings, scored by rsart-eval.
+
+For each selected object: render the pd2gs protocol (4 states x 50 train + 10 test views, 320x240,
+plain background), train PD²GS (default ``TrainConfig``), discover parts/joints/meshes (default
+``DiscoveryConfig``), and -- on the same trained fields, so they cost no extra training -- the
+discovery ablations (no refinement, oracle masks, given part count, the paper's joint-type rule,
+2 states instead of 4). Every configuration becomes one rsart-submission/1 that ``rsart-eval``
+scores; the report has the paper-style table per category for the default, the wall time per
+object, and one row of category means per ablation.
+
+    python benchmarks/pd2gs_suite.py --split two-part [--limit 6] [--work /tmp/pd2gs-suite]
+    python benchmarks/pd2gs_suite.py --objects storage-0001,drawer-0000
+
+Writes ``benchmarks/results/pd2gs-rsart-synth.md`` and ``.json`` (override with ``--out``). Re-running
+with the same ``--work`` reuses rendered data and finished training runs.
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+TARGETS = {"axis_ang": "< 1°", "axis_pos": "< 0.1", "part_motion_rev": "< 2°", "part_motion_pri": "< 0.02",
+           "cd_w": "< 5", "count_acc": "≥ 90 %"}
+ROW_METRICS = ("cd_s", "cd_m", "cd_w", "axis_ang", "axis_pos", "part_motion_rev", "part_motion_pri",
+               "type_acc", "count_acc")
+ABLATIONS = {  # name -> DiscoveryConfig overrides (same trained field)
+    "default": {},
+    "no-refine": {"refine": False},
+    "oracle-masks": {"mask_provider": "oracle"},
+    "given-count": {"counter": "given"},
+    "paper-joint-rule": {"joint_rule": "paper"},
+    "2-states": {"n_states": 2},
+}
+
+
+def _say(msg: str) -> None:
+    print(msg, flush=True)
+
+
+def prepare_data(work: Path, ids: list[str] | None, split: str | None, limit: int | None) -> tuple[Path, list[str]]:
+    """Generate the suite twins (once) and render the pd2gs protocol for the selected objects."""
+    from rsart.cli import main as rsart_main
+    from rsart.format import read_index
+
+    twins = work / "twins"
+    if not (twins / "index.json").is_file():
+        if rsart_main(["generate", "--suite", "rsart-synth", "--out", str(twins)]):
+            raise SystemExit("rsart generate failed")
+    index = read_index(twins / "index.json")
+    if ids is None:
+        if split not in index.splits:
+            raise SystemExit(f"unknown split {split!r}; suite splits: {sorted(index.splits)}")
+        ids = list(index.splits[split])
+        if limit:  # spread the subset over categories: round-robin by category
+            cats = index.extra.get("categories", {})
+            by_cat: dict[str, list[str]] = {}
+            for oid in ids:
+                by_cat.setdefault(cats.get(oid, "?"), []).append(oid)
+            order = [lst[i] for i in range(max(map(len, by_cat.values()))) for lst in by_cat.values() if i < len(lst)]
+            ids = order[:limit]
+    unknown = [i for i in ids if i not in index.objects]
+    if unknown:
+        raise SystemExit(f"not in rsart-synth: {unknown}")
+    data = work / "data"
+    for oid in ids:
+        if (data / oid / "states" / "m3" / "cameras.json").is_file():
+            continue
+        t0 = time.time()
+        if rsart_main(["render", str(twins / oid), "--protocol", "pd2gs", "--out", str(data), "--size", "320x240",
+                       "--background", "plain", "--no-progress"]):
+            raise SystemExit(f"rsart render failed on {oid}")
+        _say(f"rendered {oid} in {time.time() - t0:.0f} s")
+    return data, ids
+
+
+def run_all(data: Path, ids: list[str], work: Path, iters: int | None, ablations: list[str]) -> dict:
+    """Train each object once, run every discovery configuration, write one submission per configuration."""
+    import rsart
+    from pd2gs.discovery.config import DiscoveryConfig
+    from pd2gs.discovery.pipeline import dataset_block, discover_safe, method_block
+    from pd2gs.discovery.submission import ObjectFailure, write_submission
+    from pd2gs.run import train_object
+    from pd2gs.train import TrainConfig
+
+    ds = rsart.load(data)
+    results: dict[str, dict] = {a: {} for a in ablations}
+    timing: dict[str, dict] = {}
+    for oid in ids:
+        obj = ds[oid]
+        cfg = TrainConfig() if iters is None else TrainConfig(iters=iters)
+        t0 = time.time()
+        model = train_object(obj.path, work / "runs" / oid, cfg, progress=False)
+        t_train = time.time() - t0
+        timing[oid] = {"train_s": t_train, "category": obj.meta.category}
+        for name in ablations:
+            over = dict(ABLATIONS[name])
+            dcfg = dataclasses.replace(DiscoveryConfig(background=model.background), **over)
+            t1 = time.time()
+            try:
+                results[name][oid] = discover_safe(model, obj, dcfg)
+            except Exception as e:  # noqa: BLE001 -- a benchmark row fails, the run goes on
+                results[name][oid] = ObjectFailure(f"{type(e).__name__}: {e}")
+            timing[oid][f"discover_s[{name}]"] = time.time() - t1
+        timing[oid]["total_s"] = t_train + timing[oid]["discover_s[default]"]
+        _say(f"{oid}: train {t_train:.0f} s, discovery {timing[oid]['discover_s[default]']:.0f} s")
+    subs = {}
+    for name in ablations:
+        dcfg = dataclasses.replace(DiscoveryConfig(), **ABLATIONS[name])
+        subs[name] = write_submission(results[name], work / "submissions" / name, method_block(dcfg),
+                                      dataset_block(str(data)), overwrite=True)
+    return {"submissions": subs, "timing": timing}
+
+
+def score(data: Path, subs: dict[str, Path], work: Path) -> dict[str, dict]:
+    from rsart.evaluation.cli import main as eval_main
+
+    out = {}
+    for name, sub in subs.items():
+        dest = work / "scores" / name
+        if eval_main([str(sub), "--data", str(data), "--out", str(dest), "--overwrite"]):
+            raise SystemExit(f"rsart-eval failed on {sub}")
+        out[name] = json.loads((dest / "scores.json").read_text())
+    return out
+
+
+def _fmt(v) -> str:
+    if v is None:
+        return "–"
+    return f"{v:.3f}" if abs(v) < 100 else f"{v:.1f}"
+
+
+def report(scores: dict[str, dict], timing: dict, work: Path, ids: list[str], wall: float) -> str:
+    default = scores["default"]
+    lines = [f"# PD²GS on rsart-synth ({len(ids)} objects, default CPU settings)", "",
+             f"Measured {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())} on {os.cpu_count()} CPU cores "
+             f"({platform.processor() or platform.machine()}), load average at the end "
+             f"{', '.join(f'{x:.1f}' for x in os.getloadavg())}; total wall time {wall / 60:.0f} min.",
+             f"Objects: {', '.join(ids)}.", "",
+             "## Default configuration, per category (rsart-eval summary)", "",
+             (work / "scores" / "default" / "summary.md").read_text().split("\n", 2)[2].strip(), "",
+             "## Targets (means over 2-part objects, start/end mean)", "",
+             "| metric | target | measured |", "|---|---|---:|"]
+    overall = default["aggregate"]["overall"]["metrics"]
+    for m, t in TARGETS.items():
+        v = overall.get(m, {}).get("mean")
+        lines.append(f"| {m} | {t} | {_fmt(v if m != 'count_acc' or v is None else 100 * v)} |")
+    per_obj = [t["total_s"] / 60 for t in timing.values()]
+    lines += [f"| minutes per object (train + discovery) | ≤ 10 | {sum(per_obj) / len(per_obj):.1f} |", "",
+              "## Wall time per object", "", "| object | category | train (s) | discovery (s) | total (min) |",
+              "|---|---|---:|---:|---:|"]
+    for oid, t in timing.items():
+        lines.append(f"| {oid} | {t['category']} | {t['train_s']:.0f} | {t['discover_s[default]']:.0f} | "
+                     f"{t['total_s'] / 60:.1f} |")
+    lines += ["", "## Ablations (same trained fields; means over categories)", "",
+              "| configuration | " + " | ".join(ROW_METRICS) + " |", "|---|" + "---:|" * len(ROW_METRICS)]
+    for name, sc in scores.items():
+        ov = sc["aggregate"]["overall"]["metrics"]
+        lines.append(f"| {name} | " + " | ".join(_fmt(ov.get(m, {}).get("mean")) for m in ROW_METRICS) + " |")
+    lines += ["", "type_acc and count_acc are fractions (1 = 100 %). Chamfer ×1000 (m²), Axis Pos ×10 (m), "
+              "Part Motion in degrees (revolute) or metres (prismatic). Formulas: docs/evaluation.md."]
+    return "\n".join(lines) + "\n"
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--work", type=Path, default=Path("/tmp/pd2gs-suite"), help="scratch folder (reused)")
+    ap.add_argument("--split", default="two-part", help="suite split (default two-part)")
+    ap.add_argument("--objects", help="comma-separated object ids (instead of --split)")
+    ap.add_argument("--limit", type=int, help="at most this many objects of the split, spread over categories")
+    ap.add_argument("--iters", type=int, help="training iterations (default: TrainConfig's)")
+    ap.add_argument("--ablations", default=",".join(ABLATIONS), help="comma list of " + ", ".join(ABLATIONS))
+    ap.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results" / "pd2gs-rsart-synth.md")
+    args = ap.parse_args()
+    abl = [a for a in args.ablations.split(",") if a]
+    if "default" not in abl:
+        abl.insert(0, "default")
+    bad = [a for a in abl if a not in ABLATIONS]
+    if bad:
+        raise SystemExit(f"unknown ablations {bad}; choose from {list(ABLATIONS)}")
+    t0 = time.time()
+    args.work.mkdir(parents=True, exist_ok=True)
+    data, ids = prepare_data(args.work, args.objects.split(",") if args.objects else None, args.split, args.limit)
+    res = run_all(data, ids, args.work, args.iters, abl)
+    scores = score(data, res["submissions"], args.work)
+    md = report(scores, res["timing"], args.work, ids, time.time() - t0)
+    from rsart.io import atomic_write_text, write_json
+
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(args.out, md)
+    write_json(args.out.with_suffix(".json"), {"objects": ids, "timing": res["timing"],
+                                               "overall": {k: v["aggregate"]["overall"] for k, v in scores.items()},
+                                               "categories": {k: v["aggregate"]["categories"]
+                                                              for k, v in scores.items()}})
+    _say(md)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
