@@ -57,8 +57,8 @@ def step_breakdown(size: int, n: int, steps: int, backend: str) -> dict:
     """Process-CPU ms per phase of a training step rebuilt from the public pieces (deform,
     rasterize, loss, backward, Adam, density statistics, quaternion renormalisation), plus the
     Adam step with ``fused=True`` as a candidate for ``train.make_optimizer``. Medians over
-    ``steps``; the phases run in the order of ``Trainer.step`` (without the lead's optional
-    regularisers)."""
+    ``steps``; the phases run in the order of ``Trainer.step`` (with its scale-offset prior,
+    without the optional isometry prior, off by default)."""
     tr = _trainer(size, n, backend)
     fld, cfg = tr.field, tr.cfg
     fused = torch.optim.Adam([{**{k: v for k, v in g.items() if k != "params"},
@@ -84,6 +84,8 @@ def step_breakdown(size: int, n: int, steps: int, backend: str) -> dict:
         out.means2d.retain_grad()
         t = lap("rasterize_forward", t)
         loss = photometric_loss(out.rgb, frame.rgb, cfg.lambda_dssim)
+        if cfg.scale_reg_weight > 0:  # as Trainer.step (the optional isometry prior is left out)
+            loss = loss + cfg.scale_reg_weight * (d.log_scales - g.log_scales).abs().mean()
         t = lap("loss_forward", t)
         tr.opt.zero_grad(set_to_none=True)
         loss.backward()
