@@ -32,7 +32,7 @@ from .readers import RawFrame, Recording
 from .register import Registration, pedestal_plane, register_twin, residual_of, up_alignment
 from .rgbd_ba import refine_rgbd
 from .select import score_frame, select_frames
-from .sfm import apply_scale, metric_scale, run_sfm
+from .sfm import apply_scale, depth_disagreement, metric_scale, run_sfm
 
 log = logging.getLogger(__name__)
 
@@ -51,6 +51,8 @@ class CaptureSettings:
     board: BoardSpec | None = None
     max_ba_reproj_px: float = 1.5
     sfm: str = "joint"  # "per-state" | "joint" (capture_tools.joint)
+    sfm_attempts: int = 3  # SfM reruns (seed + 1, ...) while the model disagrees with the depth sensor
+    max_depth_disagreement: float = 0.02  # median |log(depth ratio / median)| of a model accepted at once
     icp_band: float = 0.08  # depth ICP also uses the pedestal in a band this fraction of the image width wide
 
 
@@ -103,9 +105,26 @@ def estimate_poses(images: dict[str, np.ndarray], K: Intrinsics, depths: dict[st
     Returns (image name -> metric c2w in the SfM frame, figures)."""
     kern = np.ones((settings.feature_dilate_px, settings.feature_dilate_px), np.uint8)
     feat_masks = {n: cv2.dilate(m.astype(np.uint8), kern) for n, m in keyed.items()}
-    sfm = run_sfm(images, K, feat_masks, seed=settings.seed, pair_filter=pair_filter)
+    sfm, attempts, best = None, [], (False, 0, 0.0)
+    for attempt in range(max(1, settings.sfm_attempts)):
+        # SIFT extraction and matching are multi-threaded, so a rerun can chain the circle differently; a
+        # wrongly chained model (seen: 1 run in ~5 on one state, 177° off) disagrees with the sensor's depth
+        try:
+            cand = run_sfm(images, K, feat_masks, seed=settings.seed + attempt, pair_filter=pair_filter)
+        except RsartError:
+            if attempt + 1 == max(1, settings.sfm_attempts) and sfm is None:
+                raise
+            continue
+        dis = depth_disagreement(cand, depths)
+        attempts.append({"registered": len(cand.c2w), "depth_disagreement": dis})
+        # rank: agrees with the depth, then registers more frames, then agrees better
+        rank = (dis <= settings.max_depth_disagreement, len(cand.c2w), -dis)
+        if sfm is None or rank > best:
+            sfm, best = cand, rank
+        if best[:2] == (True, len(images)):
+            break
     scale, n_ratios = metric_scale(sfm, depths)
-    extra: dict = {"depth_scale_factor": scale}
+    extra: dict = {"depth_scale_factor": scale, "sfm_attempts": attempts}
     if settings.board is not None:
         seen = {n: p for n, rgb in images.items() if (p := board_pose(rgb, K, settings.board)) is not None}
         if len(seen) >= 3:
@@ -115,7 +134,7 @@ def estimate_poses(images: dict[str, np.ndarray], K: Intrinsics, depths: dict[st
             extra.update(board_views=len(seen), board_note="board seen in < 3 views: depth scale kept")
     sfm = apply_scale(sfm, scale)
     report: dict = {**extra, "sfm_registered": len(sfm.c2w), "sfm_reprojection_px": sfm.mean_reprojection_error,
-                    "metric_scale_ratios": n_ratios}
+                    "metric_scale_ratios": n_ratios, **({"sfm_pairs": sfm.pair_counts} if sfm.pair_counts else {})}
     if settings.rgbd_ba:
         refined, ba = refine_rgbd(sfm, K, depths)
         kept = ba.median_reproj_px <= settings.max_ba_reproj_px  # a diverged adjustment must not replace SfM

@@ -36,6 +36,7 @@ class SfmResult:
     points: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     scale: float = 1.0
     mean_reprojection_error: float = float("nan")
+    pair_counts: dict = field(default_factory=dict)  # pair_filter: verified pairs kept / thinned / dropped
 
     def registered(self, names: list[str]) -> float:
         """Fraction of ``names`` that SfM registered."""
@@ -91,8 +92,7 @@ def run_sfm(images: dict[str, np.ndarray], intrinsics: Intrinsics, masks: dict[s
                                   camera_mode=pycolmap.CameraMode.SINGLE, reader_options=reader,
                                   extraction_options=ext, device=pycolmap.Device.cpu)
         pycolmap.match_exhaustive(db, device=pycolmap.Device.cpu)
-        if pair_filter is not None:
-            _filter_pairs(db, pair_filter)
+        counts = _filter_pairs(db, pair_filter) if pair_filter is not None else {}
         opts = pycolmap.IncrementalPipelineOptions()
         opts.ba_refine_focal_length = False
         opts.ba_refine_principal_point = False
@@ -104,7 +104,9 @@ def run_sfm(images: dict[str, np.ndarray], intrinsics: Intrinsics, masks: dict[s
         if not models:
             raise RsartError(f"SfM registered no images ({len(images)} given): too little texture or overlap")
         rec = max(models.values(), key=lambda r: r.num_reg_images())
-        return _result(rec)
+        out = _result(rec)
+        out.pair_counts = counts
+        return out
     finally:
         if own:
             shutil.rmtree(work, ignore_errors=True)
@@ -182,13 +184,12 @@ def stable_depth(depth: np.ndarray, rel: float = 0.015) -> np.ndarray:
     return np.where(ok, d, 0).astype(np.float32)
 
 
-def metric_scale(sfm: SfmResult, depths: dict[str, np.ndarray], min_points: int = 20) -> tuple[float, int]:
-    """Metres per SfM unit: the median of measured / SfM depth over every observation with valid depth.
+def depth_ratios(sfm: SfmResult, depths: dict[str, np.ndarray]) -> np.ndarray:
+    """(M,) measured / SfM depth over every observation with a stable depth measurement.
 
     ``depths``: name -> (H, W) float z-depth in metres (0 = none), aligned to the colour image.
-    The median (not a mean) ignores points on depth edges and holes. Returns (scale, number of ratios).
     """
-    ratios = []
+    ratios = [np.zeros(0)]
     for name, ob in sfm.observations.items():
         if name not in depths or name not in sfm.c2w or not len(ob):
             continue
@@ -201,10 +202,25 @@ def metric_scale(sfm: SfmResult, depths: dict[str, np.ndarray], min_points: int 
         z_meas = d[v[ok], u[ok]]
         good = (z_meas > 0) & (z_sfm > 0)
         ratios.append(z_meas[good] / z_sfm[good])
-    r = np.concatenate(ratios) if ratios else np.zeros(0)
+    return np.concatenate(ratios)
+
+
+def metric_scale(sfm: SfmResult, depths: dict[str, np.ndarray], min_points: int = 20) -> tuple[float, int]:
+    """Metres per SfM unit: the median of :func:`depth_ratios` (the median, not a mean, ignores points on
+    depth edges and holes). Returns (scale, number of ratios)."""
+    r = depth_ratios(sfm, depths)
     if len(r) < min_points:
         raise RsartError(f"metric scale: only {len(r)} SfM points have a depth measurement (need {min_points})")
     return float(np.median(r)), int(len(r))
+
+
+def depth_disagreement(sfm: SfmResult, depths: dict[str, np.ndarray]) -> float:
+    """Median |log(ratio / median ratio)| of :func:`depth_ratios`: how far SfM's structure departs from the
+    sensor's up to one scale (~0.005 for a right model, several times more for a wrongly chained one); inf
+    without ratios."""
+    r = depth_ratios(sfm, depths)
+    r = r[r > 0]
+    return float(np.median(np.abs(np.log(r / np.median(r))))) if len(r) else float("inf")
 
 
 def apply_scale(sfm: SfmResult, s: float) -> SfmResult:
@@ -215,7 +231,7 @@ def apply_scale(sfm: SfmResult, s: float) -> SfmResult:
         m[:3, 3] *= s
         c2w[n] = m
     obs = {n: np.concatenate([o[:, :2], o[:, 2:] * s], axis=1) for n, o in sfm.observations.items()}
-    return SfmResult(c2w, obs, sfm.points * s, sfm.scale * s, sfm.mean_reprojection_error)
+    return SfmResult(c2w, obs, sfm.points * s, sfm.scale * s, sfm.mean_reprojection_error, sfm.pair_counts)
 
 
 def transform_poses(c2w: dict[str, np.ndarray], T: np.ndarray) -> dict[str, np.ndarray]:

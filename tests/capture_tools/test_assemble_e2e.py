@@ -77,6 +77,9 @@ def test_frames_layout_end_to_end(sim_capture, tmp_path):
     report = assemble(raw, sim_capture, None, out, CaptureSettings(n_views=24, sfm="joint"), progress=lambda *_: None)
     joint = report["joint"]
     assert joint["used"] and joint["registered_per_state"] == {"m0": 24, "m3": 24}
+    # cross-state pairs lost their matches off the static base (thinned or dropped); same-state pairs kept all
+    pairs = joint["sfm_pairs"]
+    assert pairs["thinned"] + pairs["dropped"] > 0 and pairs["kept"] > 0, pairs
     # only the static base ties the states: neither none nor all of a state's object pixels (measured ~0.4 of the
     # closed cabinet, whose lid top moves, and ~0.3 of the open one, whose uncovered body top m0 never saw)
     assert all(0.15 < f < 0.7 for f in joint["static_fraction"].values()), joint["static_fraction"]
