@@ -42,8 +42,8 @@ def refine_with_depth(c2w: dict[str, np.ndarray], intrinsics: Intrinsics, depths
     """Refined copy of ``c2w`` and the final median ICP inlier RMSE (metres) over the views.
 
     Joint mode (several states in one frame): ``groups`` (name -> state id) and ``static`` (name -> other
-    state id -> (H, W) mask of the pixels static with respect to that state) make a view's target its own state's object points plus only the *static*
-    points of the other states (movable parts are elsewhere there).
+    state id -> (H, W) mask of the pixels static with respect to that state) make a view's target its own
+    state's points plus only the *static* points of the other states (movable parts are elsewhere there).
     """
     names = [n for n in sorted(c2w) if n in depths]
     cur = dict(c2w)

@@ -26,8 +26,6 @@ per-state models together, the per-state results are kept and the report says so
 """
 from __future__ import annotations
 
-import logging
-
 import numpy as np
 import open3d as o3d
 import trimesh
@@ -41,8 +39,6 @@ from rsart.kinematics import Twin
 from .depth_align import view_points
 from .pipeline import CaptureSettings, StateRecon, StateResult, estimate_poses, place_state
 from .register import Registration, outer_surface_samples
-
-log = logging.getLogger(__name__)
 
 
 def fused_points(recon: StateRecon, K: Intrinsics, stride: int = 2, voxel: float = 0.002) -> np.ndarray:
@@ -172,8 +168,8 @@ def process_joint(recons: list[StateRecon], ids: list[str], K: Intrinsics, twin:
            for r, rc in zip(first, joint)]
     T = register_twin_joint(meshes, obj, first[best].registration.T, seed=settings.seed)
     report.update(used=True, registration_seed_state=ids[best])
-    out = [place_state(rc, K, twin, v, settings, registration=Registration(T, 0.0, 0.0, first[best].registration.coarse_fitness))
-           for rc, v in zip(joint, values)]
+    shared = Registration(T, 0.0, 0.0, first[best].registration.coarse_fitness)  # residuals computed per state
+    out = [place_state(rc, K, twin, v, settings, registration=shared) for rc, v in zip(joint, values)]
     return out, report
 
 

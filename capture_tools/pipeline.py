@@ -3,14 +3,17 @@
 :func:`process_state` streams the recording twice (never holding more than the selected frames):
 
 1. score every frame (chroma-key mask, sharpness, exposure) and select ``n_views`` spread in time;
-2. re-read the selected frames; SfM (pycolmap, known intrinsics, features inside the dilated masks);
-   metric scale from depth; RGB-D bundle adjustment; leave-one-out depth ICP per view;
+2. re-read the selected frames; SfM (pycolmap, known intrinsics, features inside the dilated masks;
+   rerun with the next seed while the model disagrees with the sensor depth); metric scale from depth;
+   RGB-D bundle adjustment; leave-one-out depth ICP per view on the object and the pedestal band
+   around it (:func:`reconstruct_state` = steps 1-2; :mod:`capture_tools.joint` repeats step 2 over
+   all states at once);
 3. pedestal plane (RANSAC on the background depth under the object) -> up direction, and pedestal
    pixels dropped from the masks;
 4. twin registration (FPFH + RANSAC, ICP) of the twin posed at the state's joint values to the
    fused object depth; cameras moved into the object (twin base) frame;
 5. part masks: the registered twin ray-cast per view (part index + 1) inside the chroma-key mask;
-   keyed pixels the twin misses take the nearest part label.
+   keyed pixels the twin misses take the nearest part label (:func:`place_state` = steps 3-5).
 """
 from __future__ import annotations
 
