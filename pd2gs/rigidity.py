@@ -47,5 +47,6 @@ def knn_graph(means: torch.Tensor, k: int = 8) -> NeighbourGraph:
 
 def isometry_loss(deformed: torch.Tensor, graph: NeighbourGraph) -> torch.Tensor:
     """Mean |‖μ_i^(k) − μ_j^(k)‖ − ‖μ_i − μ_j‖| / scale over the graph's pairs (deformed (N, 3))."""
-    d = (deformed[:, None, :] - deformed[graph.idx]).norm(dim=-1)
+    nb = deformed.index_select(0, graph.idx.reshape(-1)).view(*graph.idx.shape, 3)
+    d = (deformed[:, None, :] - nb).norm(dim=-1)
     return (d - graph.rest).abs().mean() / graph.scale
