@@ -97,10 +97,12 @@ def run_all(data: Path, ids: list[str], work: Path, iters: int | None, ablations
     for oid in ids:
         obj = ds[oid]
         cfg = TrainConfig() if iters is None else TrainConfig(iters=iters)
-        t0 = time.time()
         model = train_object(obj.path, work / "runs" / oid, cfg, progress=False)
-        t_train = time.time() - t0
-        timing[oid] = {"train_s": t_train, "category": obj.meta.category}
+        # the run's own training time (also right when a finished run is reused)
+        t_train = float(json.loads((work / "runs" / oid / "metrics.json").read_text())["seconds"])
+        metrics = json.loads((work / "runs" / oid / "metrics.json").read_text())
+        timing[oid] = {"train_s": t_train, "category": obj.meta.category,
+                       "test_psnr": metrics.get("test_psnr", {})}
         for name in ablations:
             over = dict(ABLATIONS[name])
             dcfg = dataclasses.replace(DiscoveryConfig(background=model.background), **over)
@@ -162,6 +164,11 @@ def report(scores: dict[str, dict], timing: dict, work: Path, ids: list[str], wa
     for oid, t in timing.items():
         lines.append(f"| {oid} | {t['category']} | {t['train_s']:.0f} | {t['discover_s[default]']:.0f} | "
                      f"{t['total_s'] / 60:.1f} |")
+    lines += ["", "## Test-view PSNR of the trained fields (dB; target ≥ 28 on 2-part objects)", "",
+              "| object | " + " | ".join(["m0", "m1", "m2", "m3", "mean"]) + " |", "|---|" + "---:|" * 5]
+    for oid, t in timing.items():
+        ps = t.get("test_psnr", {})
+        lines.append(f"| {oid} | " + " | ".join(_fmt(ps.get(k)) for k in ("m0", "m1", "m2", "m3", "mean")) + " |")
     lines += ["", "## Ablations (same trained fields; means over categories)", "",
               "| configuration | " + " | ".join(ROW_METRICS) + " |", "|---|" + "---:|" * len(ROW_METRICS)]
     for name, sc in scores.items():
