@@ -37,6 +37,7 @@ class TrainConfig:
     seed: int = 0
     init_points: int = 5000
     depth_init: bool = False
+    init: str = "hull"  # "hull": RGB-only visual hull (ours, pd2gs/hull.py) | "box": uniform in the box
     background: tuple[float, float, float] | None = None  # None: estimated from image borders
     deform: DeformConfig = field(default_factory=DeformConfig)
     lambda_dssim: float = 0.2
@@ -85,7 +86,8 @@ def estimate_background(frames: list[Frame]) -> tuple[float, float, float]:
 
 
 def build_field(cfg: TrainConfig, frames: list[Frame]) -> DeformableField:
-    """Canonical Gaussians from depth back-projection (cfg.depth_init) or uniformly in the
+    """Canonical Gaussians from depth back-projection (cfg.depth_init), else from the RGB-only visual
+    hull (cfg.init == "hull", pd2gs/hull.py; the box when the hull is empty), else uniformly in the
     object's bounding box (its twin over the training states, padded 10%; without a twin, a box
     derived from the cameras); deformation MLP at identity; K = len(cfg.states) latents."""
     points = None
@@ -97,6 +99,16 @@ def build_field(cfg: TrainConfig, frames: list[Frame]) -> DeformableField:
         lo, hi = box[0] - pad, box[1] + pad
     else:
         lo, hi = camera_bounds(frames, points)
+    if points is None and cfg.init == "hull":
+        from pd2gs.hull import hull_points
+
+        train = [f for f in frames if f.split == "train"]
+        hp = hull_points(train, cfg.background if cfg.background is not None else estimate_background(train),
+                         lo, hi, cfg.init_points, cfg.seed)
+        if hp is not None:
+            points, colors = hp, torch.full_like(hp, 0.5)
+    elif cfg.init not in ("hull", "box"):
+        raise ValueError(f"TrainConfig.init must be 'hull' or 'box', got {cfg.init!r}")
     if points is not None:
         g = init_from_points(points, colors, cfg.init_points, cfg.seed)
     else:
