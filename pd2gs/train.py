@@ -37,7 +37,8 @@ class TrainConfig:
     seed: int = 0
     init_points: int = 5000
     depth_init: bool = False
-    init: str = "hull"  # "hull": RGB-only visual hull (ours, pd2gs/hull.py) | "box": uniform in the box
+    init: str = "box"  # "box": uniform in the box | "hull": RGB-only visual hull (ours, pd2gs/hull.py);
+    # hull measured worse on the 4-object suite run (benchmarks/results/pd2gs-rsart-synth-init-hull.md)
     background: tuple[float, float, float] | None = None  # None: estimated from image borders
     deform: DeformConfig = field(default_factory=DeformConfig)
     lambda_dssim: float = 0.2
