@@ -87,7 +87,7 @@ def run_all(data: Path, ids: list[str], work: Path, iters: int | None, ablations
     import rsart
     from pd2gs.discovery.config import DiscoveryConfig
     from pd2gs.discovery.pipeline import dataset_block, discover_safe, method_block
-    from pd2gs.discovery.submission import ObjectFailure, write_submission
+    from pd2gs.discovery.submission import write_submission
     from pd2gs.run import train_object
     from pd2gs.train import TrainConfig
 
@@ -107,10 +107,7 @@ def run_all(data: Path, ids: list[str], work: Path, iters: int | None, ablations
             over = dict(ABLATIONS[name])
             dcfg = dataclasses.replace(DiscoveryConfig(background=model.background), **over)
             t1 = time.time()
-            try:
-                results[name][oid] = discover_safe(model, obj, dcfg)
-            except Exception as e:  # noqa: BLE001 -- a benchmark row fails, the run goes on
-                results[name][oid] = ObjectFailure(f"{type(e).__name__}: {e}")
+            results[name][oid] = discover_safe(model, obj, dcfg)  # a failure becomes null, never a crash
             timing[oid][f"discover_s[{name}]"] = time.time() - t1
         timing[oid]["total_s"] = t_train + timing[oid]["discover_s[default]"]
         _say(f"{oid}: train {t_train:.0f} s, discovery {timing[oid]['discover_s[default]']:.0f} s")

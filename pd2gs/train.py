@@ -17,7 +17,7 @@ import numpy as np
 import torch
 
 from pd2gs.data import Frame, backproject_frames, camera_bounds, object_bounds
-from pd2gs.deform import DeformableField, DeformConfig
+from pd2gs.deform import DeformableField, DeformConfig, DeformedGaussians
 from pd2gs.densify import DensifyStats, densify_and_prune, reset_opacity
 from pd2gs.gaussians import init_from_bounds, init_from_points
 from pd2gs.losses import photometric_loss, psnr
@@ -90,7 +90,8 @@ def build_field(cfg: TrainConfig, frames: list[Frame]) -> DeformableField:
     """Canonical Gaussians from depth back-projection (cfg.depth_init), else from the RGB-only visual
     hull (cfg.init == "hull", pd2gs/hull.py; the box when the hull is empty), else uniformly in the
     object's bounding box (its twin over the training states, padded 10%; without a twin, a box
-    derived from the cameras); deformation MLP at identity; K = len(cfg.states) latents."""
+    derived from the cameras); deformation MLP at identity; K = len(cfg.states) latents.
+    ``cfg.background`` must already be set (the Trainer estimates it first)."""
     points = None
     if cfg.depth_init:
         points, colors = backproject_frames([f for f in frames if f.split == "train"])
@@ -103,9 +104,8 @@ def build_field(cfg: TrainConfig, frames: list[Frame]) -> DeformableField:
     if points is None and cfg.init == "hull":
         from pd2gs.hull import hull_points
 
-        train = [f for f in frames if f.split == "train"]
-        hp = hull_points(train, cfg.background if cfg.background is not None else estimate_background(train),
-                         lo, hi, cfg.init_points, cfg.seed)
+        hp = hull_points([f for f in frames if f.split == "train"], cfg.background, lo, hi, cfg.init_points,
+                         cfg.seed)
         if hp is not None:
             points, colors = hp, torch.full_like(hp, 0.5)
     elif cfg.init not in ("hull", "box"):
@@ -135,6 +135,11 @@ def make_optimizer(cfg: TrainConfig, fld: DeformableField) -> torch.optim.Adam:
 def render_frame(fld: DeformableField, latent: torch.Tensor, frame: Frame, background, backend: str, **kw):
     """Render the field deformed by ``latent`` (D,) into ``frame``'s camera (RenderOutput)."""
     d = fld.deform(latent, kw.pop("mask", None), kw.pop("base_latent", None))
+    return render_deformed(fld, d, frame, background, backend, **kw)
+
+
+def render_deformed(fld: DeformableField, d: DeformedGaussians, frame: Frame, background, backend: str, **kw):
+    """Render already-deformed geometry ``d`` with the field's shared colours and opacities."""
     g = fld.gaussians
     w, h = frame.size
     return rasterize(d.means, d.quats, d.log_scales.exp(), g.colors, g.opacities, frame.K, frame.w2c,
@@ -208,11 +213,9 @@ class Trainer:
         cfg = self.cfg
         self._set_lrs()
         frame = self._next_frame()
-        d = self.field.deform(self.field.latent(frame.state))
+        d = self.field.deform(self.field.latent(frame.state))  # kept: the priors below read it
         g = self.field.gaussians
-        w, h = frame.size
-        out = rasterize(d.means, d.quats, d.log_scales.exp(), g.colors, g.opacities, frame.K, frame.w2c,
-                        w, h, background=torch.tensor(cfg.background), backend=cfg.backend)
+        out = render_deformed(self.field, d, frame, cfg.background, cfg.backend)
         out.means2d.retain_grad()
         loss = photometric_loss(out.rgb, frame.rgb, cfg.lambda_dssim)
         rig = self._rigidity(d.means)
