@@ -68,6 +68,14 @@ class TrainConfig:
     rigidity_k: int = 8
     # ours: L1 penalty on the per-state log-scale offsets (parts move rigidly, they do not grow or shrink)
     scale_reg_weight: float = 1.0
+    # ours: per-state visual-hull prior (pd2gs/hull.py HullPrior; docs/pd2gs.md "Thin objects"): mean
+    # distance of the state's centres to its hull (hull_weight) and of hull voxels to the nearest opaque
+    # Gaussian (hull_cover_weight), both fading linearly to 0 at hull_until_frac * iters
+    hull_weight: float = 0.0
+    hull_cover_weight: float = 0.0
+    hull_until_frac: float = 0.5
+    hull_resolution: int = 64
+    hull_dilate: int = 0  # grow the foreground masks by this many pixels before carving
 
     @staticmethod
     def from_json(d: dict) -> "TrainConfig":
@@ -86,30 +94,51 @@ def estimate_background(frames: list[Frame]) -> tuple[float, float, float]:
     return tuple(float(v) for v in px.median(dim=0).values)
 
 
-def build_field(cfg: TrainConfig, frames: list[Frame]) -> DeformableField:
-    """Canonical Gaussians from depth back-projection (cfg.depth_init), else from the RGB-only visual
-    hull (cfg.init == "hull", pd2gs/hull.py; the box when the hull is empty), else uniformly in the
-    object's bounding box (its twin over the training states, padded 10%; without a twin, a box
-    derived from the cameras); deformation MLP at identity; K = len(cfg.states) latents.
-    ``cfg.background`` must already be set (the Trainer estimates it first)."""
-    points = None
-    if cfg.depth_init:
-        points, colors = backproject_frames([f for f in frames if f.split == "train"])
+def field_box(cfg: TrainConfig, frames: list[Frame], points: torch.Tensor | None = None):
+    """(lo, hi) (3,) metres: the object's twin box over the training states padded 10%, else a box
+    derived from the cameras (and ``points``)."""
     box = object_bounds(cfg.object_dir, cfg.states) if (points is None and cfg.object_dir) else None
     if box is not None:
         pad = 0.1 * (box[1] - box[0]).clamp(min=1e-3)
-        lo, hi = box[0] - pad, box[1] + pad
-    else:
-        lo, hi = camera_bounds(frames, points)
-    if points is None and cfg.init == "hull":
-        from pd2gs.hull import hull_points
+        return box[0] - pad, box[1] + pad
+    return camera_bounds(frames, points)
 
-        hp = hull_points([f for f in frames if f.split == "train"], cfg.background, lo, hi, cfg.init_points,
-                         cfg.seed)
+
+def needs_hulls(cfg: TrainConfig) -> bool:
+    return not cfg.depth_init and (cfg.init in ("hull", "hull0") or cfg.hull_weight > 0 or cfg.hull_cover_weight > 0)
+
+
+def build_hulls(cfg: TrainConfig, frames: list[Frame]):
+    """Per-state visual hulls (pd2gs/hull.py ``HullGrid``) of the training views in the field box."""
+    from pd2gs.hull import state_hulls
+
+    lo, hi = field_box(cfg, frames)
+    return state_hulls([f for f in frames if f.split == "train"], cfg.background, lo, hi,
+                       cfg.hull_resolution, dilate=cfg.hull_dilate)
+
+
+def build_field(cfg: TrainConfig, frames: list[Frame], hulls=None) -> DeformableField:
+    """Canonical Gaussians from depth back-projection (cfg.depth_init), else from the RGB-only visual
+    hull (pd2gs/hull.py; cfg.init == "hull": the union of the per-state hulls, "hull0": the hull of
+    the first training state; the box when the hull is empty), else uniformly in the object's bounding
+    box (its twin over the training states, padded 10%; without a twin, a box derived from the
+    cameras); deformation MLP at identity; K = len(cfg.states) latents. ``hulls``: a precomputed
+    ``HullGrid`` (else computed here when needed). ``cfg.background`` must already be set (the
+    Trainer estimates it first)."""
+    if cfg.init not in ("hull", "hull0", "box"):
+        raise ValueError(f"TrainConfig.init must be 'box', 'hull' or 'hull0', got {cfg.init!r}")
+    points = None
+    if cfg.depth_init:
+        points, colors = backproject_frames([f for f in frames if f.split == "train"])
+    lo, hi = field_box(cfg, frames, points)
+    if points is None and cfg.init in ("hull", "hull0"):
+        from pd2gs.hull import sample_voxels
+
+        hulls = hulls if hulls is not None else build_hulls(cfg, frames)
+        mask = hulls.occ.any(0) if cfg.init == "hull" else hulls.occ[0]
+        hp = sample_voxels(hulls, mask, cfg.init_points, cfg.seed)
         if hp is not None:
             points, colors = hp, torch.full_like(hp, 0.5)
-    elif cfg.init not in ("hull", "box"):
-        raise ValueError(f"TrainConfig.init must be 'hull' or 'box', got {cfg.init!r}")
     if points is not None:
         g = init_from_points(points, colors, cfg.init_points, cfg.seed)
     else:
@@ -159,7 +188,13 @@ class Trainer:
         torch.set_num_threads(cfg.threads)
         if cfg.background is None:
             cfg.background = estimate_background(self.train)
-        self.field = build_field(cfg, frames)
+        hulls = build_hulls(cfg, frames) if needs_hulls(cfg) else None
+        self.field = build_field(cfg, frames, hulls)
+        self.hull_prior = None
+        if hulls is not None and (cfg.hull_weight > 0 or cfg.hull_cover_weight > 0):
+            from pd2gs.hull import HullPrior
+
+            self.hull_prior = HullPrior(hulls, self.field.extent)
         self.opt = make_optimizer(cfg, self.field)
         self.stats = DensifyStats.zeros(self.field.gaussians.num)
         self.iteration = 0
@@ -208,6 +243,23 @@ class Trainer:
             self.graph = knn_graph(self.field.gaussians.means, self.cfg.rigidity_k)
         return isometry_loss(deformed_means, self.graph)
 
+    def hull_factor(self) -> float:
+        """Weight multiplier of the hull prior: 1 at the start, linearly 0 at hull_until_frac * iters."""
+        end = self.cfg.hull_until_frac * self.cfg.iters
+        return max(0.0, 1.0 - self.iteration / end) if end > 0 else 0.0
+
+    def _hull_terms(self, means: torch.Tensor, k: int) -> torch.Tensor | float:
+        hp, cfg = self.hull_prior, self.cfg
+        f = self.hull_factor()
+        if hp is None or f <= 0 or not hp.has(k):
+            return 0.0
+        out = 0.0
+        if cfg.hull_weight > 0:
+            out = out + f * cfg.hull_weight * hp.outside(means, k)
+        if cfg.hull_cover_weight > 0:
+            out = out + f * cfg.hull_cover_weight * hp.coverage(means, self.field.gaussians.opacities, k, self.gen)
+        return out
+
     def step(self) -> dict:
         """One training iteration; returns {loss, psnr}."""
         cfg = self.cfg
@@ -223,6 +275,7 @@ class Trainer:
             loss = loss + cfg.rigidity_weight * rig
         if cfg.scale_reg_weight > 0:
             loss = loss + cfg.scale_reg_weight * (d.log_scales - g.log_scales).abs().mean()
+        loss = loss + self._hull_terms(d.means, frame.state)
         self.opt.zero_grad(set_to_none=True)
         loss.backward()
         self.iteration += 1
