@@ -102,3 +102,39 @@ def test_scale_regulariser_keeps_per_state_scales(frames):
             d = tr.field.deform(tr.field.latent(1))
             return float((d.log_scales - tr.field.gaussians.log_scales).abs().mean())
     assert scale_drift(10.0) < 0.5 * scale_drift(0.0)
+
+
+def test_hull_prior_pulls_the_deformed_centres_into_each_state_hull(frames):
+    def outside_after(weight):
+        cfg = tiny_config(30)
+        cfg.hull_weight, cfg.hull_cover_weight, cfg.hull_until_frac = weight, weight, 1.0  # box init
+        cfg.hull_resolution = 24
+        tr = Trainer(cfg, frames)
+        assert (tr.hull_prior is not None) == (weight > 0)
+        for _ in range(30):
+            tr.step()
+        probe = tr.hull_prior if tr.hull_prior is not None else _prior_of(cfg, frames, tr.field.extent)
+        with torch.no_grad():
+            return float(probe.outside(tr.field.deform(tr.field.latent(1)).means, 1))
+    assert outside_after(20.0) < 0.5 * outside_after(0.0)
+
+
+def _prior_of(cfg, frames, extent):
+    from pd2gs.hull import HullPrior
+    from pd2gs.train import build_hulls
+
+    return HullPrior(build_hulls(cfg, frames), extent)
+
+
+def test_hull_prior_fades_out_and_old_configs_load(frames):
+    cfg = tiny_config(20)
+    cfg.hull_weight, cfg.hull_until_frac = 1.0, 0.5
+    tr = Trainer(cfg, frames)
+    assert tr.hull_factor() == 1.0
+    tr.iteration = 5
+    assert abs(tr.hull_factor() - 0.5) < 1e-9
+    tr.iteration = 10
+    assert tr.hull_factor() == 0.0 and tr._hull_terms(tr.field.gaussians.means, 1) == 0.0
+    old = {k: v for k, v in TrainConfig().__dict__.items() if not k.startswith("hull")}
+    old["deform"] = {}
+    assert TrainConfig.from_json(old).hull_weight == TrainConfig().hull_weight
