@@ -69,6 +69,8 @@ def _parser() -> argparse.ArgumentParser:
                    help="part counter (default trajectory)")
     u.add_argument("--joint-rule", default=None, choices=["bic", "paper"], help="joint-type rule (default bic)")
     u.add_argument("--no-refine", action="store_true", help="ablation: skip boundary-aware refinement")
+    u.add_argument("--no-articulate", action="store_true",
+                   help="ablation: the paper's centre-based joints, without our photometric articulation fit")
     u.add_argument("--mask-provider", default=None, choices=["grabcut", "sam", "oracle"])
     u.add_argument("--n-states", type=int, default=None, help="ablation: use 2 states instead of all")
     u.add_argument("--quiet", action="store_true", help="no progress bars")
@@ -209,6 +211,8 @@ def _run(args) -> int:
                               ("mask_provider", args.mask_provider), ("n_states", args.n_states)) if v is not None}
     if args.no_refine:
         over["refine"] = False
+    if args.no_articulate:
+        over["articulate"] = False
     try:
         dcfg = dataclasses.replace(DiscoveryConfig(), **over)
     except ValueError as e:

@@ -12,6 +12,7 @@ Ablation switches (docs/pd2gs-parts.md has the table):
 * ``counter``         — "motion" (default) | "vlm" | "given" (oracle count from meta.json).
 * ``joint_rule``      — "paper" (residual-rank rule) | "bic" (ours: translation vs rotation by BIC).
 * ``split_disconnected`` — ours: split each motion cluster into spatially connected pieces.
+* ``articulate``      — ours: photometric refinement of joints and joint types (False = paper's joints).
 """
 from __future__ import annotations
 
@@ -89,6 +90,14 @@ class DiscoveryConfig:
     bic_noise_rel: float = 1e-3      # ours: noise floor of the BIC rule (fraction of the part extent)
     robust_thresh_rel: float = 0.02  # ours: RANSAC inlier threshold (fraction of the part extent)
     robust_iters: int = 200
+    # ours: refine every joint (and its type) by rendering the rigidly articulated reference field against
+    # the training images (pd2gs/discovery/articulate.py); False = the paper's centre-based joints only
+    articulate: bool = True
+    articulate_iters: int = 300      # Adam steps per fit (the type trial fits once more per part)
+    articulate_views: int = 24       # training views per state (evenly spaced)
+    articulate_max_side: int = 160   # those views are rendered at most this large (the trainer's size)
+    relabel: bool = True             # ours: after the fit, relabel Gaussians by multi-view colour consistency
+                                     # under each part's motion, then re-fit the joints
 
     # --- meshing (paper App. A.2)
     voxel_size: float | None = None  # None: object extent / 128

@@ -171,6 +171,19 @@ def part_meshes(fld: StateField, labels: np.ndarray, obj, sid: str, cfg: Discove
     return out, whole
 
 
+def articulate_joints(fld: StateField, labels: np.ndarray, joints: dict, obj, cfg: DiscoveryConfig
+                      ) -> tuple[dict, np.ndarray, dict]:
+    """Photometric refinement of the centre-based joints (:mod:`.articulate`) on each state's train views."""
+    from .articulate import FitSettings, fit_articulation
+
+    views = [[(cam, _resize(view.rgb, cam)) for _, cam, view in
+              pick_views(obj, s, cfg.articulate_views, cfg.articulate_max_side)] for s in fld.state_ids]
+    ev = obj.meta.eval_states
+    return fit_articulation(fld, labels, joints, views, ev["start"], ev["end"],
+                            FitSettings(iters=cfg.articulate_iters,
+                                                                      relabel=cfg.relabel), cfg.background, cfg.render_backend, cfg.seed)
+
+
 # ----------------------------------------------------------------------------- the pipeline
 def discover(field_or_model: Any, obj, config: DiscoveryConfig | None = None) -> ObjectResult:
     """Parts, joints and meshes of one object (an ``rsart.load`` RSArtObject) from its trained field."""
@@ -202,19 +215,25 @@ def discover(field_or_model: Any, obj, config: DiscoveryConfig | None = None) ->
     if cfg.refine:
         fld, labels, diag["refine"] = refine_parts(fld, labels, obj, states, ev["start"], cfg)
     fld.labels = labels
+    joints = {}
+    for p in range(1, int(labels.max()) + 1):
+        sel = labels == p
+        if sel.sum() >= 3:
+            joints[p] = estimate_joint(fld.means[:, sel], fld.state_ids, ev["start"], ev["end"], cfg.joint_rule,
+                                       cfg.paper_r_thresh, cfg.bic_noise_rel, cfg.robust_thresh_rel,
+                                       cfg.robust_iters, cfg.seed)
+    if cfg.articulate and joints:
+        joints, labels, diag["articulate"] = articulate_joints(fld, labels, joints, obj, cfg)
+        joints = {p: j for p, j in joints.items() if (labels == p).sum() >= 3}
+        fld.labels = labels
     ref_means = fld.means[fld.index(ev["start"])]
     extent = float(np.linalg.norm(np.ptp(ref_means, axis=0)))
     voxel = cfg.voxel_size or extent / 128
     mesh_states = [ev.get(s, s) for s in cfg.mesh_states.split(",")]
     meshes = {sid: part_meshes(fld, labels, obj, sid, cfg, voxel) for sid in mesh_states}
     parts = [PartResult("static", 0, {sid: meshes[sid][0].get(0) for sid in mesh_states})]
-    for p in range(1, int(labels.max()) + 1):
-        sel = labels == p
-        if sel.sum() < 3:
-            continue
-        j = estimate_joint(fld.means[:, sel], fld.state_ids, ev["start"], ev["end"], cfg.joint_rule,
-                           cfg.paper_r_thresh, cfg.bic_noise_rel, cfg.robust_thresh_rel, cfg.robust_iters, cfg.seed)
-        parts.append(PartResult(f"p{p}", p, {sid: meshes[sid][0].get(p) for sid in mesh_states}, j))
+    parts += [PartResult(f"p{p}", p, {sid: meshes[sid][0].get(p) for sid in mesh_states}, j)
+              for p, j in joints.items()]
     diag["seconds"] = time.perf_counter() - t0
     diag["joints"] = {p.name: {"type": p.joint.type, "type_paper": p.joint.type_paper, "type_bic": p.joint.type_bic,
                                **p.joint.diagnostics} for p in parts if p.joint is not None}
@@ -234,7 +253,8 @@ def method_block(cfg: DiscoveryConfig, states_used: int | None = None) -> dict:
     """The submission's ``method`` object for these settings (ablation flags included)."""
     return {"name": "PD2GS", "version": pd2gs.__version__, "inputs": ["rgb"], "camera_poses": "gt",
             "states_used": states_used if states_used is not None else (cfg.n_states or "all"),
-            "discovery": {"counter": cfg.counter, "refine": cfg.refine, "mask_provider": cfg.mask_provider,
+            "discovery": {"counter": cfg.counter, "refine": cfg.refine, "articulate": cfg.articulate,
+                          "relabel": cfg.relabel, "mask_provider": cfg.mask_provider,
                           "joint_rule": cfg.joint_rule, "n_states": cfg.n_states}}
 
 

@@ -70,7 +70,9 @@ def _angle(a, b):
 def test_pipeline_end_to_end_scores(data, tmp_path):
     obj = rsart.load(data / "cabinet-0000")
     fld, _ = perfect_field(obj.twin, obj.meta, ["m0", "m1", "m2", "m3"], n=1500)
-    cfg = DiscoveryConfig(joint_rule="bic", mesh_views=6, refine_views=4, finetune_iters=5)
+    # the paper's centre-based joints: this field is geometrically exact but its flat part colours do not
+    # reproduce the textured views, so a photometric fit has nothing to go on (tests/.../test_articulate.py)
+    cfg = DiscoveryConfig(joint_rule="bic", mesh_views=6, refine_views=4, finetune_iters=5, articulate=False)
     res = discover(fld, obj, cfg)
     assert res.diagnostics["count"]["n"] == 2
     assert res.diagnostics["refine"]["splits"] > 0
