@@ -333,7 +333,8 @@ def _relabel_photo(ref, labels: np.ndarray, joints: list[_Joint], views: Views, 
     mean = np.where(cnt >= s.photo_min_views, err / np.maximum(cnt, 1), np.inf)
     cur = np.array([col_of.get(int(lab), 0) for lab in labels])
     best = mean.argmin(1)
-    gain = mean[np.arange(n), cur] - mean[np.arange(n), best]
+    with np.errstate(invalid="ignore"):  # inf - inf where a Gaussian has no evidence at all
+        gain = mean[np.arange(n), cur] - mean[np.arange(n), best]
     # a Gaussian hidden under its current label has no evidence against it: it keeps its label
     change = np.isfinite(mean[np.arange(n), best]) & np.isfinite(mean[np.arange(n), cur]) & (gain > s.photo_margin)
     new = np.where(change, best, cur)
