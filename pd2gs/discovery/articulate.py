@@ -282,22 +282,14 @@ def _project(cam: Camera, X: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.nda
     return np.round(uv[:, 0]).astype(int), np.round(uv[:, 1]).astype(int), z
 
 
-def _relabel_photo(ref, labels: np.ndarray, joints: list[_Joint], views: Views, ref_k: int, s: FitSettings,
-                   scale: float, bg, backend: str) -> tuple[np.ndarray, dict]:
-    """Multi-view colour consistency of each Gaussian under each part's motion -> new labels (N,).
-
-    For every non-reference state k and a few of its views, the Gaussian centre moved by each candidate
-    (static or joint p) is projected; where it is not hidden behind the surface rendered with the current
-    labels (depth + tol), its colour is compared with the captured pixel, and a position in front of that
-    surface (empty space) costs at least ``photo_free_err``. A Gaussian takes the candidate
-    with the lowest mean |colour error| when that beats its current label by ``photo_margin`` with at least
-    ``photo_min_views`` views of evidence for both. Hand-written: a render-and-compare test per Gaussian
-    and hypothesis, which no library offers."""
+def _photo_errors(ref, labels: np.ndarray, joints: list[_Joint], views: Views, ref_k: int, s: FitSettings,
+                  scale: float, bg, backend: str) -> tuple[np.ndarray, np.ndarray]:
+    """Mean |colour error| (N, 1 + P) of every Gaussian under every candidate motion (column 0 static, then
+    ``joints``), inf with fewer than ``photo_min_views`` views of evidence; -> (errors, column labels)."""
     from pd2gs.render import rasterize
 
     f32 = lambda a: torch.as_tensor(np.ascontiguousarray(a), dtype=torch.float32)  # noqa: E731
     cols = np.array([0] + [j.label for j in joints])
-    col_of = {int(lab): c for c, lab in enumerate(cols)}
     mu = ref["means"].numpy().astype(np.float64)
     colors = ref["colors"].numpy()
     n = len(labels)
@@ -330,7 +322,23 @@ def _relabel_photo(ref, labels: np.ndarray, joints: list[_Joint], views: Views, 
                     e = np.where(free, np.maximum(e, s.photo_free_err), e)
                     err[idx[vis], c] += e[vis]
                     cnt[idx[vis], c] += 1
-    mean = np.where(cnt >= s.photo_min_views, err / np.maximum(cnt, 1), np.inf)
+    return np.where(cnt >= s.photo_min_views, err / np.maximum(cnt, 1), np.inf), cols
+
+
+def _relabel_photo(ref, labels: np.ndarray, joints: list[_Joint], views: Views, ref_k: int, s: FitSettings,
+                   scale: float, bg, backend: str) -> tuple[np.ndarray, dict]:
+    """Multi-view colour consistency of each Gaussian under each part's motion -> new labels (N,).
+
+    For every non-reference state k and a few of its views, the Gaussian centre moved by each candidate
+    (static or joint p) is projected; where it is not hidden behind the surface rendered with the current
+    labels (depth + tol), its colour is compared with the captured pixel, and a position in front of that
+    surface (empty space) costs at least ``photo_free_err``. A Gaussian takes the candidate
+    with the lowest mean |colour error| when that beats its current label by ``photo_margin`` with at least
+    ``photo_min_views`` views of evidence for both. Hand-written: a render-and-compare test per Gaussian
+    and hypothesis, which no library offers."""
+    mean, cols = _photo_errors(ref, labels, joints, views, ref_k, s, scale, bg, backend)
+    col_of = {int(lab): c for c, lab in enumerate(cols)}
+    n = len(labels)
     cur = np.array([col_of.get(int(lab), 0) for lab in labels])
     best = mean.argmin(1)
     with np.errstate(invalid="ignore"):  # inf - inf where a Gaussian has no evidence at all
