@@ -37,8 +37,11 @@ class TrainConfig:
     seed: int = 0
     init_points: int = 5000
     depth_init: bool = False
-    init: str = "box"  # "box": uniform in the box | "hull": RGB-only visual hull (ours, pd2gs/hull.py);
-    # hull measured worse on the 4-object suite run (benchmarks/results/pd2gs-rsart-synth-init-hull.md)
+    # "hull" (default): the union of the per-state RGB-only visual hulls (ours, pd2gs/hull.py) | "hull0": the
+    # hull of the first state only | "box": uniform in the box. Without the hull prior below, the hull start
+    # measured worse than the box on the suite (benchmarks/results/pd2gs-rsart-synth-init-hull.md); with it,
+    # it is what makes thin objects train (docs/pd2gs.md "Thin objects")
+    init: str = "hull"
     background: tuple[float, float, float] | None = None  # None: estimated from image borders
     deform: DeformConfig = field(default_factory=DeformConfig)
     lambda_dssim: float = 0.2
@@ -64,18 +67,19 @@ class TrainConfig:
     curriculum: bool = False  # measured worse on storage-0001 (docs/pd2gs.md)
     curriculum_frac: float = 0.4
     # ours: local isometry prior on the deformation (pd2gs/rigidity.py); 0 disables it
-    rigidity_weight: float = 0.0  # off: 0.2 and 0.02 measured worse on storage-0001 (docs/pd2gs.md)
+    rigidity_weight: float = 0.05  # 0.2 and 0.02 measured worse on storage-0001 without the hull prior;
+    # 0.05 with it kept the eyeglasses' temples from sliding along themselves (docs/pd2gs.md "Thin objects")
     rigidity_k: int = 8
     # ours: L1 penalty on the per-state log-scale offsets (parts move rigidly, they do not grow or shrink)
     scale_reg_weight: float = 1.0
     # ours: per-state visual-hull prior (pd2gs/hull.py HullPrior; docs/pd2gs.md "Thin objects"): mean
     # distance of the state's centres to its hull (hull_weight) and of hull voxels to the nearest opaque
     # Gaussian (hull_cover_weight), both fading linearly to 0 at hull_until_frac * iters
-    hull_weight: float = 0.0
-    hull_cover_weight: float = 0.0
-    hull_until_frac: float = 0.5
+    hull_weight: float = 1.0
+    hull_cover_weight: float = 1.0
+    hull_until_frac: float = 0.8
     hull_resolution: int = 64
-    hull_dilate: int = 0  # grow the foreground masks by this many pixels before carving
+    hull_dilate: int = 1  # grow the foreground masks by this many pixels before carving
 
     @staticmethod
     def from_json(d: dict) -> "TrainConfig":
@@ -84,6 +88,9 @@ class TrainConfig:
         d["size"] = tuple(d["size"])
         if d.get("background") is not None:
             d["background"] = tuple(d["background"])
+        for key in ("hull_weight", "hull_cover_weight"):  # runs written before the prior existed
+            d.setdefault(key, 0.0)
+        d.setdefault("hull_dilate", 0)
         names = {f.name for f in dataclasses.fields(TrainConfig)}
         return TrainConfig(**{k: v for k, v in d.items() if k in names})
 
@@ -341,7 +348,8 @@ class Trainer:
                 "opt": self.opt.state_dict(), "stats": (self.stats.grad_sum, self.stats.count),
                 "rng": self.rng.bit_generator.state, "gen": self.gen.get_state(),
                 "torch_rng": torch.get_rng_state(), "py_rng": random.getstate(),
-                "order": list(map(int, self.order)), "history": self.history}
+                "order": list(map(int, self.order)), "history": self.history,
+                "graph": None if self.graph is None else (self.graph.idx, self.graph.rest, self.graph.scale)}
 
     def load_state_dict(self, st: dict) -> None:
         self.field.gaussians.resize_like({k.split(".", 1)[1]: v for k, v in st["field"].items()
@@ -357,6 +365,7 @@ class Trainer:
         random.setstate(st["py_rng"])
         self.order = list(st["order"])
         self.history = st["history"]
+        self.graph = NeighbourGraph(*st["graph"]) if st.get("graph") is not None else None  # resume bit-exact
 
     def save(self) -> Path:
         """Atomically write RUN/checkpoint.pt (and config.json, cameras.json)."""

@@ -107,7 +107,7 @@ def test_scale_regulariser_keeps_per_state_scales(frames):
 def test_hull_prior_pulls_the_deformed_centres_into_each_state_hull(frames):
     def outside_after(weight):
         cfg = tiny_config(30)
-        cfg.hull_weight, cfg.hull_cover_weight, cfg.hull_until_frac = weight, weight, 1.0  # box init
+        cfg.init, cfg.hull_weight, cfg.hull_cover_weight, cfg.hull_until_frac = "box", weight, weight, 1.0
         cfg.hull_resolution = 24
         tr = Trainer(cfg, frames)
         assert (tr.hull_prior is not None) == (weight > 0)
@@ -137,4 +137,5 @@ def test_hull_prior_fades_out_and_old_configs_load(frames):
     assert tr.hull_factor() == 0.0 and tr._hull_terms(tr.field.gaussians.means, 1) == 0.0
     old = {k: v for k, v in TrainConfig().__dict__.items() if not k.startswith("hull")}
     old["deform"] = {}
-    assert TrainConfig.from_json(old).hull_weight == TrainConfig().hull_weight
+    loaded = TrainConfig.from_json(old)  # a run written before the prior existed resumes without it
+    assert loaded.hull_weight == 0.0 and loaded.hull_cover_weight == 0.0 and TrainConfig().hull_weight > 0
