@@ -42,6 +42,7 @@ class TrainConfig:
     # measured worse than the box on the suite (benchmarks/results/pd2gs-rsart-synth-init-hull.md); with it,
     # it is what makes thin objects train (docs/pd2gs.md "Thin objects")
     init: str = "hull"
+    init_union_frac: float = 0.0  # init="hull0": this fraction of the points comes from the union hull
     background: tuple[float, float, float] | None = None  # None: estimated from image borders
     deform: DeformConfig = field(default_factory=DeformConfig)
     lambda_dssim: float = 0.2
@@ -143,7 +144,11 @@ def build_field(cfg: TrainConfig, frames: list[Frame], hulls=None) -> Deformable
 
         hulls = hulls if hulls is not None else build_hulls(cfg, frames)
         mask = hulls.occ.any(0) if cfg.init == "hull" else hulls.occ[0]
-        hp = sample_voxels(hulls, mask, cfg.init_points, cfg.seed)
+        n_union = int(round(cfg.init_union_frac * cfg.init_points)) if cfg.init == "hull0" else 0
+        hp = sample_voxels(hulls, mask, cfg.init_points - n_union, cfg.seed)
+        if hp is not None and n_union > 0:  # a part hidden in the first state still gets some Gaussians
+            extra = sample_voxels(hulls, hulls.occ.any(0), n_union, cfg.seed + 1)
+            hp = torch.cat([hp, extra]) if extra is not None else hp
         if hp is not None:
             points, colors = hp, torch.full_like(hp, 0.5)
     if points is not None:

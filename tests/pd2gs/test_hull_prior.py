@@ -68,3 +68,18 @@ def test_coverage_is_small_only_when_opaque_centres_fill_the_hull():
     mixed = torch.cat([clump, filled])
     weights = torch.cat([torch.ones(2000), torch.zeros(2000)])
     assert float(prior.coverage(mixed, weights, 1, gen)) > 0.04
+
+
+def test_first_state_start_takes_a_share_of_the_union_hull():
+    from pd2gs.train import TrainConfig, build_field
+
+    frames = _ball_frames([-0.25, 0.0, 0.0], 0.1, 0) + _ball_frames([0.25, 0.0, 0.0], 0.1, 1)
+
+    def share_on_the_right(init, frac):
+        cfg = TrainConfig(states=["a", "b"], init=init, init_union_frac=frac, init_points=400,
+                          background=BG, hull_resolution=32)
+        x = build_field(cfg, frames).gaussians.means[:, 0]
+        return float((x > 0).float().mean())
+    assert share_on_the_right("hull0", 0.0) == 0.0          # only the first state's ball
+    assert 0.05 < share_on_the_right("hull0", 0.25) < 0.2   # a quarter of the union: about half of it right
+    assert 0.3 < share_on_the_right("hull", 0.0) < 0.7      # the union: both balls
