@@ -1,4 +1,4 @@
-"""RGB-only initialisation of the canonical Gaussians from silhouettes (ours; ``TrainConfig.init="hull"``).
+"""RGB-only visual hulls (ours): the canonical start (``TrainConfig.init="hull"``) and the per-state hull prior (``HullPrior``).
 
 3DGS starts from SfM points; PD²GS inherits that. Starting instead from Gaussians spread uniformly in
 the object's box works for bulky objects but not for thin ones (a desk lamp's arms are 1–2 px at
