@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import multiprocessing
 import os
 import platform
 import sys
@@ -131,7 +132,8 @@ def run_all(data: Path, ids: list[str], work: Path, iters: int | None, ablations
                        "test_psnr": metrics.get("test_psnr", {})}
         _say(f"{oid}: trained in {timing[oid]['train_s']:.0f} s")
     tasks = [(str(data), oid, str(work / "runs" / oid), name) for oid in ids for name in ablations]
-    with ProcessPoolExecutor(max_workers=max(1, jobs)) as pool:
+    # spawn, not fork: the parent ran torch's OpenMP while training, and forking it aborts the workers
+    with ProcessPoolExecutor(max_workers=max(1, jobs), mp_context=multiprocessing.get_context("spawn")) as pool:
         for oid, name, res, secs in pool.map(_discover_one, tasks):
             results[name][oid] = res
             timing[oid][f"discover_s[{name}]"] = secs

@@ -85,7 +85,7 @@ class TrainConfig:
     @staticmethod
     def from_json(d: dict) -> "TrainConfig":
         d = dict(d)
-        d["deform"] = DeformConfig(**d.get("deform", {}))
+        d["deform"] = DeformConfig(**{"activation": "relu", **d.get("deform", {})})  # configs from before `activation` existed: ReLU
         d["size"] = tuple(d["size"])
         if d.get("background") is not None:
             d["background"] = tuple(d["background"])

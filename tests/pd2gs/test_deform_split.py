@@ -1,14 +1,16 @@
 """The deformation network's latent-as-bias evaluation equals the plain concatenated input."""
 from __future__ import annotations
 
+import pytest
 import torch
 
 from pd2gs.deform import DeformConfig, DeformMLP
 
 
-def test_forward_split_equals_forward_on_concatenated_input():
+@pytest.mark.parametrize("activation", ["relu", "leaky"])
+def test_forward_split_equals_forward_on_concatenated_input(activation):
     torch.manual_seed(0)
-    cfg = DeformConfig()
+    cfg = DeformConfig(activation=activation, leaky_slope=0.05)
     mlp = DeformMLP(cfg).double()
     with torch.no_grad():
         mlp.head.weight.normal_(0, 0.1)
@@ -26,3 +28,8 @@ def test_forward_split_equals_forward_on_concatenated_input():
     for a, b in zip(g_split, g_full):
         assert b.abs().max() > 0
         assert torch.allclose(a, b, rtol=0, atol=1e-10)
+
+
+def test_unknown_activation_is_named():
+    with pytest.raises(ValueError, match="activation"):
+        DeformConfig(activation="gelu")
