@@ -165,12 +165,7 @@ class HullPrior:
 
 def hull_points(frames, background, lo, hi, n: int, seed: int, resolution: int = 64,
                 min_voxels: int = 50) -> torch.Tensor | None:
-    """(n, 3) float32 points drawn uniformly in the hull's voxels, or None when the hull has fewer than
-    ``min_voxels`` voxels (e.g. a background the colour test cannot separate; callers fall back to the box)."""
-    centres = visual_hull(frames, background, lo, hi, resolution)
-    if len(centres) < min_voxels:
-        return None
-    step = float((np.asarray(hi) - np.asarray(lo)).max()) / resolution
-    rng = np.random.default_rng(seed)
-    pick = centres[rng.integers(0, len(centres), n)]
-    return torch.as_tensor(pick + rng.uniform(-0.5, 0.5, (n, 3)) * step, dtype=torch.float32)
+    """(n, 3) float32 points drawn uniformly in the union hull's voxels (``sample_voxels``), or None when
+    it has fewer than ``min_voxels`` voxels (e.g. a background the colour test cannot separate)."""
+    grid = state_hulls(frames, background, lo, hi, resolution)
+    return sample_voxels(grid, grid.occ.any(0), n, seed, min_voxels)

@@ -38,8 +38,10 @@ import torch
 
 from rsart.camera import Camera
 
+from pd2gs.deform import quat_multiply
+from pd2gs.render.projection import quat_to_rotmat
+
 from .field import StateField
-from .finetune import _quat_mul
 from .kinematics import EPS, JointEstimate
 
 Views = list[list[tuple[Camera, np.ndarray]]]  # views[k] = [(camera, rgb uint8 (H, W, 3))] of state k
@@ -81,21 +83,14 @@ class _Joint:
     values: torch.Tensor  # (K,) angle (rad) or slide (m) per state; the reference entry is held at 0
 
 
-def _rodrigues(u: torch.Tensor, a: torch.Tensor) -> torch.Tensor:
-    """(3, 3) rotation by angle a (scalar tensor) about unit axis u (3,)."""
-    K = torch.zeros(3, 3, dtype=u.dtype)
-    K[0, 1], K[0, 2], K[1, 0], K[1, 2], K[2, 0], K[2, 1] = -u[2], u[1], u[2], -u[0], -u[1], u[0]
-    return torch.eye(3, dtype=u.dtype) + torch.sin(a) * K + (1 - torch.cos(a)) * (K @ K)
-
-
 def _motion(j: _Joint, k: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Joint j's rigid motion to state k: x' = R x + t, and its rotation as a quaternion (4,)."""
     u = j.axis / (j.axis.norm() + EPS)
     v = j.values[k]
     if j.type == "revolute":
-        R = _rodrigues(u, v)
-        h = 0.5 * v
-        return R, j.pivot - R @ j.pivot, torch.cat([torch.cos(h).reshape(1), torch.sin(h) * u])
+        rq = torch.cat([torch.cos(0.5 * v).reshape(1), torch.sin(0.5 * v) * u])
+        R = quat_to_rotmat(rq[None])[0]
+        return R, j.pivot - R @ j.pivot, rq
     return torch.eye(3), v * u, torch.tensor([1.0, 0.0, 0.0, 0.0])
 
 
@@ -109,7 +104,7 @@ def _pose(ref: dict[str, torch.Tensor], groups: dict[int, torch.Tensor], joints:
         R, t, rq = _motion(j, k)
         means = means.index_put((idx,), means[idx] @ R.T + t)
         if j.type == "revolute":
-            quats = quats.index_put((idx,), _quat_mul(rq.expand(len(idx), 4), quats[idx]))
+            quats = quats.index_put((idx,), quat_multiply(rq.expand(len(idx), 4), quats[idx]))
     return means, quats
 
 
@@ -122,39 +117,11 @@ def _render(ref, groups, joints, k, cam: Camera, bg, backend: str) -> torch.Tens
                      cam.width, cam.height, background=bg, backend=backend).rgb
 
 
-def _init_joint(je: JointEstimate, jtype: str, label: int, P: np.ndarray, Qs: np.ndarray, state_ids: list[str],
-                ref: int) -> _Joint:
-    """Start values for ``jtype`` from the centre-based estimate ``je`` (its own type) or, for the other
-    type, from the part's centre trajectories P (n, 3) -> Qs (K, n, 3): median displacement (slide) or the
-    estimate's axis/pivot with angles from the displacement about it."""
-    K = len(state_ids)
+def _init_joint(je: JointEstimate, label: int, state_ids: list[str], ref: int) -> _Joint:
+    """Learnable copy of the centre-based estimate ``je`` (its own type; values relative to ``ref``)."""
     vals = np.array([je.values.get(s, 0.0) for s in state_ids], dtype=np.float64)
-    axis, pivot = np.asarray(je.axis, float), np.asarray(je.origin, float)
-    if jtype != je.type:
-        if jtype == "prismatic":
-            D = np.median(Qs - P[None], axis=1)  # (K, 3) robust mean translation per state
-            far = int(np.argmax(np.linalg.norm(D, axis=1)))
-            axis = D[far] / (np.linalg.norm(D[far]) + EPS)
-            vals = D @ axis
-        else:  # revolute from a slide estimate: rotate about the axis through ... the part centroid's side
-            # a slide's axis is the motion direction; a hinge is perpendicular to it: take the part's
-            # principal direction most orthogonal to the slide and pivot at the centroid
-            C = P - P.mean(0)
-            V = np.linalg.svd(C, full_matrices=False)[2]
-            axis = V[int(np.argmin(np.abs(V @ axis)))]
-            pivot = P.mean(0)
-            vals = np.zeros(K)
-            for k in range(K):
-                a, b = C, Qs[k] - Qs[k].mean(0)
-                # signed rotation angle about the axis, from the 2D Procrustes in the plane orthogonal to it
-                e1 = np.cross(axis, [1.0, 0, 0] if abs(axis[0]) < 0.9 else [0, 1.0, 0])
-                e1 /= np.linalg.norm(e1)
-                e2 = np.cross(axis, e1)
-                za, zb = a @ e1 + 1j * (a @ e2), b @ e1 + 1j * (b @ e2)
-                vals[k] = float(np.angle(np.sum(zb * np.conj(za))))
-    vals = vals - vals[ref]
     t = lambda a: torch.tensor(np.asarray(a, dtype=np.float32), requires_grad=True)  # noqa: E731
-    return _Joint(label, jtype, t(axis), t(pivot), t(vals))
+    return _Joint(label, je.type, t(je.axis), t(je.origin), t(vals - vals[ref]))
 
 
 def _principal_axes(P: np.ndarray) -> np.ndarray:
@@ -405,7 +372,7 @@ def fit_articulation(fld: StateField, labels: np.ndarray, joints: dict[int, Join
     train = [p for p in pairs if p not in set(held)] or pairs
     scale = float(np.linalg.norm(np.ptp(fld.means[r], axis=0))) or 1.0
     Qs = {p: fld.means[:, labels == p] for p in joints}
-    cur = [_init_joint(je, je.type, p, Qs[p][r], Qs[p], fld.state_ids, r) for p, je in joints.items()]
+    cur = [_init_joint(je, p, fld.state_ids, r) for p, je in joints.items()]
     diag: dict = {"loss_start": _held_out_loss(refg, groups, cur, views, held, bg, backend), "seconds": {}}
     clock = time.perf_counter()
 
@@ -414,17 +381,20 @@ def fit_articulation(fld: StateField, labels: np.ndarray, joints: dict[int, Join
         diag["seconds"][name] = round(time.perf_counter() - clock, 2)
         clock = time.perf_counter()
     other_type = {"revolute": "prismatic", "prismatic": "revolute"}
+    opaque = np.asarray(fld.opacities).reshape(-1) > 0.1
+    far = fld.index(end) if end in fld.state_ids and end != ref else max(
+        (k for k in range(fld.k) if k != r), key=lambda k: float(np.abs(fld.means[k] - fld.means[r]).sum()))
+
+    def search(i: int, p: int, jtype: str) -> tuple[_Joint, float]:
+        sel = (labels == p) & opaque
+        P = fld.means[r][sel] if sel.sum() >= 3 else Qs[p][r]
+        return _search(refg, groups, cur, i, jtype, joints[p], P, views, far, r, s, scale, bg, backend)
     alts: dict[int, _Joint] = {}
     if s.search:
-        opaque = np.asarray(fld.opacities).reshape(-1) > 0.1
-        far = fld.index(end) if end in fld.state_ids and end != ref else max(
-            (k for k in range(fld.k) if k != r), key=lambda k: float(np.abs(fld.means[k] - fld.means[r]).sum()))
         diag["search"] = {}
         for i, (p, je) in enumerate(joints.items()):
-            sel = (labels == p) & opaque
-            P = fld.means[r][sel] if sel.sum() >= 3 else Qs[p][r]
             types = [je.type, other_type[je.type]] if s.choose_type else [je.type]
-            found = {t: _search(refg, groups, cur, i, t, je, P, views, far, r, s, scale, bg, backend) for t in types}
+            found = {t: search(i, p, t) for t in types}
             if len(found) == 2:
                 pick = ("revolute" if found["revolute"][1] < found["prismatic"][1] * (1 - s.type_margin)
                         else "prismatic")
@@ -442,10 +412,7 @@ def fit_articulation(fld: StateField, labels: np.ndarray, joints: dict[int, Join
     if s.choose_type:
         for i, j in enumerate(list(cur)):
             other = other_type[j.type]
-            alt = alts.get(j.label)
-            if alt is None:
-                base = _to_estimate(j, joints[j.label], fld.state_ids, r, end, Qs[j.label][r].mean(0), {})
-                alt = _init_joint(base, other, j.label, Qs[j.label][r], Qs[j.label], fld.state_ids, r)
+            alt = alts[j.label] if j.label in alts else search(i, j.label, other)[0]
             trial = cur[:i] + [alt] + cur[i + 1:]
             _optimise(refg, groups, trial, views, r, s, scale, bg, backend, rng, train, learn=[alt])
             loss = _held_out_loss(refg, groups, trial, views, held, bg, backend)
@@ -466,7 +433,7 @@ def fit_articulation(fld: StateField, labels: np.ndarray, joints: dict[int, Join
         lap("relabel+refit")
     # a part keeps its centre-based joint when the images do not prefer the fitted one (e.g. a field whose
     # colours do not reproduce the captures): the fit never makes a joint photometrically worse
-    start = {p: _init_joint(je, je.type, p, Qs[p][r], Qs[p], fld.state_ids, r) for p, je in joints.items()}
+    start = {p: _init_joint(je, p, fld.state_ids, r) for p, je in joints.items()}
     kept = []
     for i, j in enumerate(list(cur)):
         trial = cur[:i] + [start[j.label]] + cur[i + 1:]
