@@ -13,7 +13,8 @@ object, and one row of category means per ablation.
     python benchmarks/pd2gs_suite.py --objects storage-0001,drawer-0000
 
 Writes ``benchmarks/results/pd2gs-rsart-synth.md`` and ``.json`` (override with ``--out``). Re-running
-with the same ``--work`` reuses rendered data and finished training runs.
+with the same ``--work`` reuses rendered data and finished training runs; ``--train-only`` stops after
+training (e.g. to train a large split while discovery code is still changing).
 """
 from __future__ import annotations
 
@@ -131,6 +132,8 @@ def run_all(data: Path, ids: list[str], work: Path, iters: int | None, ablations
         timing[oid] = {"train_s": float(metrics["seconds"]), "category": obj.meta.category,
                        "test_psnr": metrics.get("test_psnr", {})}
         _say(f"{oid}: trained in {timing[oid]['train_s']:.0f} s")
+    if not ablations:  # --train-only
+        return {"timing": timing}
     tasks = [(str(data), oid, str(work / "runs" / oid), name) for oid in ids for name in ablations]
     # spawn, not fork: the parent ran torch's OpenMP while training, and forking it aborts the workers
     with ProcessPoolExecutor(max_workers=max(1, jobs), mp_context=multiprocessing.get_context("spawn")) as pool:
@@ -216,6 +219,8 @@ def main() -> int:
     ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
                     help="discovery worker processes after training (default: one per core)")
     ap.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results" / "pd2gs-rsart-synth.md")
+    ap.add_argument("--train-only", action="store_true",
+                    help="render and train the selected objects into --work, then stop (a later run reuses them)")
     args = ap.parse_args()
     abl = [a for a in args.ablations.split(",") if a]
     if "default" not in abl:
@@ -226,6 +231,10 @@ def main() -> int:
     t0 = time.time()
     args.work.mkdir(parents=True, exist_ok=True)
     data, ids = prepare_data(args.work, args.objects.split(",") if args.objects else None, args.split, args.limit)
+    if args.train_only:
+        run_all(data, ids, args.work, args.iters, [], args.jobs)
+        _say(f"trained {len(ids)} objects in {(time.time() - t0) / 60:.0f} min")
+        return 0
     res = run_all(data, ids, args.work, args.iters, abl, args.jobs)
     scores = score(data, res["submissions"], args.work)
     md = report(scores, res["timing"], args.work, ids, time.time() - t0)
