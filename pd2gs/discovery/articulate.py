@@ -21,6 +21,10 @@ state with the L1 photometric loss, in four steps:
 3. type choice: the other type is fitted from its own search result; the lower held-out loss wins,
    revolute needing a relative margin (a revolute joint with a far pivot can imitate a slide).
    (A part whose centre-based joint renders no worse on held-out views keeps that joint.)
+3b. chains: each part is also fitted as hanging from each movable part it touches (its motion is then
+   its parent's followed by its own joint, whose axis and pivot are given at the reference state); the
+   chain is kept when it lowers the error over the part's own pixels by ``chain_margin``. The submitted
+   joint of a chained part is then relative to its parent, as the benchmark's ground truth is.
 4. relabelling: each Gaussian takes the part under whose motion its colour agrees best with the
    captured pixels in the other states (multi-view colour consistency), then step 2 again.
 
@@ -70,6 +74,9 @@ class FitSettings:
     photo_margin: float = 0.03   # mean |colour error| a new label must beat the current one by
     photo_depth_tol: float = 0.01  # x scene extent: visible when no deeper than the rendered surface + tol
     photo_free_err: float = 0.25   # least error of a position in front of the rendered surface (empty space)
+    chain: bool = True           # try each part as hanging from a touching movable part (lamp arms, handles)
+    chain_touch: float = 0.03    # x scene extent: parts closer than this touch (candidate parents)
+    chain_margin: float = 0.05   # the chained fit must lower the part's own pixel error by this fraction
 
 
 @dataclass
@@ -81,6 +88,7 @@ class _Joint:
     axis: torch.Tensor    # (3,) unnormalised
     pivot: torch.Tensor   # (3,) revolute only (unused for prismatic)
     values: torch.Tensor  # (K,) angle (rad) or slide (m) per state; the reference entry is held at 0
+    parent: int | None = None  # label of the part it hangs from (None: the static base)
 
 
 def _motion(j: _Joint, k: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
@@ -94,17 +102,35 @@ def _motion(j: _Joint, k: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor
     return torch.eye(3), v * u, torch.tensor([1.0, 0.0, 0.0, 0.0])
 
 
+def _world_motions(joints: list[_Joint], k: int) -> dict[int, tuple[torch.Tensor, torch.Tensor, torch.Tensor]]:
+    """label -> world motion (R, t, quat) of each part to state k: its own joint motion, then its parents'.
+    A chained joint's axis and pivot are in the reference state's world frame, where every motion is the
+    identity, so x' = T_parent(k) T_joint(k) x."""
+    by_label = {j.label: j for j in joints}
+    out: dict[int, tuple[torch.Tensor, torch.Tensor, torch.Tensor]] = {}
+
+    def world(j: _Joint, depth: int = 0):
+        if j.label not in out:
+            R, t, rq = _motion(j, k)
+            if j.parent in by_label and depth < len(joints):  # depth: a cycle cannot recurse forever
+                Rp, tp, qp = world(by_label[j.parent], depth + 1)
+                R, t, rq = Rp @ R, Rp @ t + tp, quat_multiply(qp[None], rq[None])[0]
+            out[j.label] = (R, t, rq)
+        return out[j.label]
+    for j in joints:
+        world(j)
+    return out
+
+
 def _pose(ref: dict[str, torch.Tensor], groups: dict[int, torch.Tensor], joints: list[_Joint], k: int
           ) -> tuple[torch.Tensor, torch.Tensor]:
     """Means (N, 3) and quats (N, 4) of the reference Gaussians articulated to state k (``groups``: label ->
     indices of its Gaussians; everything else stays put)."""
     means, quats = ref["means"], ref["quats"]
-    for j in joints:
-        idx = groups[j.label]
-        R, t, rq = _motion(j, k)
+    for label, (R, t, rq) in _world_motions(joints, k).items():
+        idx = groups[label]
         means = means.index_put((idx,), means[idx] @ R.T + t)
-        if j.type == "revolute":
-            quats = quats.index_put((idx,), quat_multiply(rq.expand(len(idx), 4), quats[idx]))
+        quats = quats.index_put((idx,), quat_multiply(rq.expand(len(idx), 4), quats[idx]))
     return means, quats
 
 
@@ -175,7 +201,7 @@ def _search(ref, groups, joints: list[_Joint], i: int, jtype: str, je: JointEsti
     with torch.no_grad():
         vs = pick(far)
         for axis, pivot in _hypotheses(je, P, jtype):
-            j = _Joint(joints[i].label, jtype, f32(axis), f32(pivot), torch.zeros(K))
+            j = _Joint(joints[i].label, jtype, f32(axis), f32(pivot), torch.zeros(K), joints[i].parent)
             for v in grid:
                 if v == 0.0:
                     continue
@@ -184,7 +210,7 @@ def _search(ref, groups, joints: list[_Joint], i: int, jtype: str, je: JointEsti
                     best, best_loss = (axis, pivot, v), loss
         axis, pivot, v = best
         if jtype == "revolute" and s.pivot_steps > 1:  # finer pivots (and nearby angles) about the chosen axis
-            j = _Joint(joints[i].label, jtype, f32(axis), f32(pivot), torch.zeros(K))
+            j = _Joint(joints[i].label, jtype, f32(axis), f32(pivot), torch.zeros(K), joints[i].parent)
             e = np.linalg.svd(np.eye(3) - np.outer(axis, axis))[0][:, :2]
             half = 0.5 * np.ptp((P - pivot) @ e, axis=0)
             offs = np.linspace(-1.0, 1.0, s.pivot_steps)
@@ -198,7 +224,7 @@ def _search(ref, groups, joints: list[_Joint], i: int, jtype: str, je: JointEsti
                         if loss < best_loss:
                             best, best_loss = (axis, pv, v2), loss
             axis, pivot, v = best
-        j = _Joint(joints[i].label, jtype, f32(axis), f32(pivot), torch.zeros(K))
+        j = _Joint(joints[i].label, jtype, f32(axis), f32(pivot), torch.zeros(K), joints[i].parent)
         j.values.data[far] = float(v)
         for k in range(K):
             if k in (far, ref_k):
@@ -268,8 +294,9 @@ def _photo_errors(ref, labels: np.ndarray, joints: list[_Joint], views: Views, r
         for k in range(len(views)):
             if k == ref_k:
                 continue
+            world = _world_motions(joints, k)
             moved = [mu] + [(mu @ R.numpy().T.astype(np.float64) + t.numpy()) for R, t, _ in
-                            (_motion(j, k) for j in joints)]
+                            (world[j.label] for j in joints)]
             means, quats = _pose(ref, groups, joints, k)
             pick = np.unique(np.linspace(0, len(views[k]) - 1, min(s.photo_views, len(views[k]))).round().astype(int))
             for i in pick:
@@ -317,6 +344,54 @@ def _relabel_photo(ref, labels: np.ndarray, joints: list[_Joint], views: Views, 
     return out_labels, {"evidence_frac": float(np.mean(np.isfinite(mean).all(1)))}
 
 
+def _part_losses(ref, groups, configs: list[list[_Joint]], label: int, views: Views, held: list[tuple[int, int]],
+                 bg, backend: str) -> list[float]:
+    """Mean |colour error| of each joint configuration over the pixels part ``label`` covers (its Gaussians
+    rendered alone, alpha > 0.3) under any of the configurations, on the held-out views. A whole-image loss
+    would hide a small part such as a handle."""
+    from pd2gs.render import rasterize
+
+    idx = groups[label]
+    err, cnt = np.zeros(len(configs)), 0
+    with torch.no_grad():
+        for k, i in held:
+            cam, rgb = views[k][i]
+            K, w2c = torch.as_tensor(cam.K, dtype=torch.float32), torch.as_tensor(cam.w2c, dtype=torch.float32)
+            gt = torch.as_tensor(rgb, dtype=torch.float32) / 255.0
+            outs, mask = [], torch.zeros(cam.height, cam.width, dtype=torch.bool)
+            for js in configs:
+                means, quats = _pose(ref, groups, js, k)
+                outs.append(rasterize(means, quats, ref["scales"], ref["colors"], ref["opacities"], K, w2c, cam.width,
+                                      cam.height, background=bg, backend=backend).rgb)
+                alone = rasterize(means[idx], quats[idx], ref["scales"][idx], ref["colors"][idx],
+                                  ref["opacities"][idx], K, w2c, cam.width, cam.height, background=bg, backend=backend)
+                mask |= alone.alpha.reshape(cam.height, cam.width) > 0.3
+            cnt += int(mask.sum())
+            for c, out in enumerate(outs):
+                err[c] += float((out - gt).abs().mean(-1)[mask].sum())
+    return list(err / max(cnt, 1))
+
+
+def _ancestors(joints: list[_Joint], label: int) -> set[int]:
+    by_label = {j.label: j for j in joints}
+    out: set[int] = set()
+    p = by_label[label].parent
+    while p in by_label and p not in out:
+        out.add(p)
+        p = by_label[p].parent
+    return out
+
+
+def _touching(fld: StateField, labels: np.ndarray, parts: list[int], r: int, dist: float) -> dict[int, list[int]]:
+    """label -> the other movable parts whose reference-state Gaussian centres come within ``dist`` of it."""
+    from scipy.spatial import cKDTree
+
+    trees = {p: cKDTree(fld.means[r][labels == p]) for p in parts if (labels == p).sum() >= 3}
+    return {p: [q for q in trees if q != p and np.isfinite(trees[p].query(fld.means[r][labels == q],
+                                                                           distance_upper_bound=dist)[0]).any()]
+            for p in trees}
+
+
 def _held_out_loss(ref, groups, joints, views: Views, held: list[tuple[int, int]], bg, backend: str) -> float:
     with torch.no_grad():
         return float(np.mean([(_render(ref, groups, joints, k, views[k][i][0], bg, backend)
@@ -330,7 +405,9 @@ def _to_estimate(j: _Joint, base: JointEstimate, state_ids: list[str], ref: int,
     u = u / (np.linalg.norm(u) + EPS)
     vals = j.values.detach().double().numpy()
     vals = vals - vals[ref]
-    if j.type == "revolute":
+    if j.type == "revolute":  # states are captured in order and move < 180 deg apart: undo the grid's wrap
+        vals = np.unwrap(vals)
+        vals = vals - vals[ref]
         o = j.pivot.detach().double().numpy()
         origin = o + u * float(u @ (centroid - o))  # the point on the axis closest to the part
     else:
@@ -422,6 +499,32 @@ def fit_articulation(fld: StateField, labels: np.ndarray, joints: dict[int, Join
             if pick == other:
                 cur, best = trial, loss
     lap("type")
+    if s.chain and len(cur) > 1:
+        # a part hanging from another movable part (lamp arm, door handle) moves in the world by its parent's
+        # motion and then its own, which no single world-frame joint reproduces: fit it as a child of each
+        # touching part and keep the chain when that explains the part's own pixels clearly better
+        diag["chain_trials"] = {}
+        near = _touching(fld, labels, [j.label for j in cur], r, s.chain_touch * scale)
+        for i in range(len(cur)):
+            j = cur[i]
+            for p in near.get(j.label, []):
+                if p == j.parent or j.label in _ancestors(cur, p) | {p}:
+                    continue
+                child = _Joint(j.label, j.type, j.axis.detach().clone(), j.pivot.detach().clone(),
+                               j.values.detach().clone(), parent=p)
+                sel = (labels == j.label) & opaque
+                P = fld.means[r][sel] if sel.sum() >= 3 else Qs[j.label][r]
+                alt, _ = _search(refg, groups, cur[:i] + [child] + cur[i + 1:], i, j.type, joints[j.label], P, views,
+                                 far, r, s, scale, bg, backend)
+                trial = cur[:i] + [alt] + cur[i + 1:]
+                _optimise(refg, groups, trial, views, r, s, scale, bg, backend, rng, train, learn=[alt])
+                own, chained = _part_losses(refg, groups, [cur, trial], j.label, views, held, bg, backend)
+                keep = chained < own * (1 - s.chain_margin)
+                diag["chain_trials"][f"{j.label}<-{p}"] = {"own": own, "chained": chained, "kept": bool(keep)}
+                if keep:
+                    cur, j = trial, alt
+        best = _held_out_loss(refg, groups, cur, views, held, bg, backend)
+        lap("chain")
     labels = np.asarray(labels).copy()
     if s.relabel:
         new, diag["relabel"] = _relabel_photo(refg, labels, cur, views, r, s, scale, bg, backend)
@@ -450,6 +553,7 @@ def fit_articulation(fld: StateField, labels: np.ndarray, joints: dict[int, Join
         sel = labels == j.label
         P = fld.means[r][sel] if sel.sum() >= 3 else Qs[j.label][r]
         out[j.label] = _to_estimate(j, joints[j.label], fld.state_ids, r, end, P.mean(0),
-                                    {"photometric_loss": best, "type_centres": joints[j.label].type})
+                                    {"photometric_loss": best, "type_centres": joints[j.label].type,
+                                     "parent": j.parent})
     diag["loss_final"] = best
     return out, labels, diag

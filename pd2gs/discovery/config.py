@@ -13,6 +13,8 @@ Ablation switches (docs/pd2gs-parts.md has the table):
 * ``joint_rule``      — "paper" (residual-rank rule) | "bic" (ours: translation vs rotation by BIC).
 * ``split_disconnected`` — ours: split each motion cluster into spatially connected pieces.
 * ``articulate``      — ours: photometric refinement of joints and joint types (False = paper's joints).
+* ``chain``           — ours, inside the articulation fit: chained joints relative to their parent part.
+* ``cluster``         — "trajectory" (paper) | "rigid" (ours): how dynamic Gaussians are grouped into parts.
 """
 from __future__ import annotations
 
@@ -21,6 +23,7 @@ from dataclasses import asdict, dataclass, field
 COUNTERS = ("trajectory", "motion", "vlm", "given")
 MASK_PROVIDERS = ("grabcut", "sam", "oracle")
 JOINT_RULES = ("paper", "bic")
+CLUSTERINGS = ("trajectory", "rigid")
 
 
 @dataclass
@@ -48,6 +51,7 @@ class DiscoveryConfig:
     kmeans_seed: int = 0
     kmeans_n_init: int = 10
     n_states: int | None = None      # ablation: 2 or 4 states (None = all states of the field)
+    cluster: str = "trajectory"      # "trajectory": paper's descriptor + k-means; "rigid": ours, by rigid motion
     split_disconnected: bool = False  # ours: split clusters into spatially connected pieces (parts that
                                       # always move together, e.g. equal drawers in multi-part states)
 
@@ -97,6 +101,7 @@ class DiscoveryConfig:
     articulate_views: int = 24       # training views per state (evenly spaced)
     articulate_max_side: int = 160   # those views are rendered at most this large (the trainer's size)
     relabel: bool = True             # ours: after the fit, relabel Gaussians by multi-view colour consistency
+    chain: bool = True               # ours: try each part as hanging from a touching movable part
                                      # under each part's motion, then re-fit the joints
 
     # --- meshing (paper App. A.2)
@@ -110,6 +115,8 @@ class DiscoveryConfig:
     seed: int = 0
 
     def __post_init__(self) -> None:
+        if self.cluster not in CLUSTERINGS:
+            raise ValueError(f"cluster={self.cluster!r}: choose one of {CLUSTERINGS}")
         if self.counter not in COUNTERS:
             raise ValueError(f"counter={self.counter!r}: choose one of {COUNTERS}")
         if self.mask_provider not in MASK_PROVIDERS:

@@ -93,12 +93,14 @@ def count_rigid_motions(means_dyn: np.ndarray, thresh: float, min_frac: float = 
     return MotionCount(len(support), support, labels)
 
 
-def local_rigid_motions(means: np.ndarray, neighbours: int = 16, sample: int = 1500, seed: int = 0) -> np.ndarray:
+def local_rigid_motions(means: np.ndarray, neighbours: int = 16, sample: int = 1500, seed: int = 0,
+                        return_index: bool = False) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
     """(M, 6) per-Gaussian rigid motion first -> last state, fitted (Kabsch) on each sampled Gaussian's
     ``neighbours`` nearest neighbours in the first state: [rotation vector (rad), translation / extent].
 
     A rigid part has one (R, t) for all its points, so these features form one tight cluster per part
     (unlike raw trajectories, whose directions vary across a rotating part). ``means``: (K, N, 3).
+    ``return_index``: also return the (M,) indices of the Gaussians the rows belong to.
     """
     from scipy.spatial.transform import Rotation
 
@@ -118,7 +120,7 @@ def local_rigid_motions(means: np.ndarray, neighbours: int = 16, sample: int = 1
     # neighbourhoods straddling two parts fit no rigid motion well: drop them (they would form a
     # spurious "in-between" cluster)
     keep = resid <= 2.0 * np.median(resid) + 1e-9
-    return feats[keep]
+    return (feats[keep], idx[keep]) if return_index else feats[keep]
 
 
 def count_by_trajectories(features: np.ndarray, max_parts: int = 8, min_silhouette: float = 0.35,

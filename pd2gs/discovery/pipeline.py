@@ -179,7 +179,7 @@ def articulate_joints(fld: StateField, labels: np.ndarray, joints: dict, obj, cf
     views = [[(cam, _resize(view.rgb, cam)) for _, cam, view in
               pick_views(obj, s, cfg.articulate_views, cfg.articulate_max_side)] for s in fld.state_ids]
     ev = obj.meta.eval_states
-    settings = FitSettings(iters=cfg.articulate_iters, relabel=cfg.relabel)
+    settings = FitSettings(iters=cfg.articulate_iters, relabel=cfg.relabel, chain=cfg.chain)
     return fit_articulation(fld, labels, joints, views, ev["start"], ev["end"], settings, cfg.background,
                             cfg.render_backend, cfg.seed)
 
@@ -206,7 +206,7 @@ def discover(field_or_model: Any, obj, config: DiscoveryConfig | None = None) ->
     if n_parts < 1 or not dyn.any():
         raise ObjectFailure(f"no movable part found ({int(dyn.sum())} dynamic Gaussians, count {n_parts})")
     labels = motion.coarse_labels(fld.means, n_parts, cfg.tau_mot, cfg.min_cluster_frac, cfg.kmeans_seed,
-                                  cfg.kmeans_n_init)
+                                  cfg.kmeans_n_init, cfg.cluster)
     if cfg.split_disconnected:
         labels = motion.split_disconnected(fld.means[fld.index(ev["start"])], labels,
                                            max(3, int(cfg.min_cluster_frac * max(1, int(dyn.sum())))))
