@@ -5,8 +5,8 @@ plain background), train PD²GS (default ``TrainConfig``), discover parts/joints
 ``DiscoveryConfig``), and -- on the same trained fields, so they cost no extra training -- the
 discovery ablations (no refinement, oracle masks, given part count, without our photometric
 articulation fit, the paper's kinematics (centre-based joints and its type rule), 2 states instead
-of 4), in ``--jobs`` worker processes. Every configuration becomes one rsart-submission/1 that ``rsart-eval``
-scores; the report has the paper-style table per category for the default, the wall time per
+of 4, no chained joints, rigid-motion clustering), in ``--jobs`` worker processes. Every configuration
+becomes one rsart-submission/1 that ``rsart-eval`` scores; the report has the paper-style table per category for the default, the wall time per
 object, and one row of category means per ablation.
 
     python benchmarks/pd2gs_suite.py --split two-part [--limit 6] [--work /tmp/pd2gs-suite]
@@ -43,6 +43,8 @@ ABLATIONS = {  # name -> DiscoveryConfig overrides (same trained field)
     "no-articulate": {"articulate": False},  # the paper's centre-based joints (our BIC type rule)
     "paper-kinematics": {"articulate": False, "joint_rule": "paper"},  # the paper's joints and type rule
     "2-states": {"n_states": 2},
+    "no-chain": {"chain": False},  # every joint in the world frame (no parent part)
+    "rigid-cluster": {"cluster": "rigid"},  # our rigid-motion clustering instead of the paper's descriptor
 }
 
 
