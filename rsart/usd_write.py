@@ -140,15 +140,20 @@ def _material(stage, path: str, texture: str):
 
 def _texture_ref(usd_dir: Path, part: TwinPart, k: int, pname: str, texture_files: dict | None,
                  pending: dict[Path, bytes]) -> str:
-    """The asset path (relative to the .usda) of visual ``k``'s texture; queues its PNG if rsart writes it."""
+    """The asset path (relative to the .usda) of visual ``k``'s texture; queues its PNG if rsart writes it
+    (once per distinct image)."""
     given = (texture_files or {}).get(part.index)
     if given is not None and k < len(given) and given[k]:
         ref = str(given[k])
         if os.path.isabs(ref):
             ref = os.path.relpath(ref, usd_dir)
         return ref.replace(os.sep, "/")
+    data = _png_bytes(_texture_image(part.visuals[k].visual))
+    for path, queued in pending.items():  # visuals sharing one image (an atlas) share one file
+        if queued == data:
+            return path.relative_to(usd_dir).as_posix()
     rel = f"textures/{pname}_{k}.png"
-    pending[usd_dir / rel] = _png_bytes(_texture_image(part.visuals[k].visual))
+    pending[usd_dir / rel] = data
     return rel
 
 

@@ -102,7 +102,8 @@ def cluster_rigid_motions(means_dyn: np.ndarray, n_parts: int, min_frac: float =
     if k == 1 or n < 10:
         return np.ones(n, dtype=np.int64)
     feats, idx = local_rigid_motions(means_dyn, seed=seed, return_index=True)
-    seed_lab = KMeans(n_clusters=min(k, len(idx)), init="k-means++", n_init=n_init, random_state=seed).fit(feats).labels_
+    km = KMeans(n_clusters=min(k, len(idx)), init="k-means++", n_init=n_init, random_state=seed)
+    seed_lab = km.fit(feats).labels_
     members = [idx[seed_lab == c] for c in range(k) if (seed_lab == c).sum() >= 3]
     lab = np.zeros(n, dtype=np.int64)
     alive = np.ones(len(members), dtype=bool)

@@ -264,3 +264,20 @@ def test_procedural_twins_roundtrip_with_textures(tmp_path, category):
             np.testing.assert_array_equal(np.asarray(got), np.asarray(img.convert(got.mode)))
             np.testing.assert_allclose(vb.visual.uv, va.visual.uv, atol=1e-7)
     assert n_tex >= 3
+
+
+def test_visuals_sharing_an_image_share_one_texture_file(tmp_path):
+    twin = _textured_twin()
+    lid_vis = twin.parts[1].visuals[0]
+    base_vis = twin.parts[0].mesh.copy()
+    uv = np.random.default_rng(4).uniform(0, 1, (len(base_vis.vertices), 2))
+    base_vis.visual = trimesh.visual.TextureVisuals(uv=uv, image=lid_vis.visual.material.image)  # the same atlas
+    twin.parts[0].visuals = [base_vis]
+    write_usd(twin, tmp_path / "twin" / "object.usda")
+    pngs = sorted(p.relative_to(tmp_path / "twin").as_posix() for p in (tmp_path / "twin").rglob("*.png"))
+    assert len(pngs) == 1, pngs
+    back = read_usd(tmp_path / "twin" / "object.usda")
+    for part in (0, 1):
+        np.testing.assert_array_equal(np.asarray(back.parts[part].visuals[0].visual.material.image.convert("RGB")),
+                                      np.asarray(lid_vis.visual.material.image))
+    np.testing.assert_allclose(back.parts[0].visuals[0].visual.uv, base_vis.visual.uv, atol=1e-7)

@@ -88,7 +88,8 @@ def _door_with_handle(seed: int = 0):
     for s in (0.0, 1 / 3, 2 / 3, 1.0):
         T_leaf = joint_motion("revolute", np.array([0.0, 0.0, 1.0]), np.zeros(3), 1.4 * s)
         T_handle = T_leaf @ joint_motion("revolute", np.array([0.0, 1.0, 0.0]), np.array([0.7, 0.0, 0.975]), 0.7 * s)
-        out.append(np.concatenate([leaf @ T_leaf[:3, :3].T + T_leaf[:3, 3], handle @ T_handle[:3, :3].T + T_handle[:3, 3]]))
+        out.append(np.concatenate([leaf @ T_leaf[:3, :3].T + T_leaf[:3, 3],
+                                   handle @ T_handle[:3, :3].T + T_handle[:3, 3]]))
     return np.stack(out), np.r_[np.ones(len(leaf), int), np.full(len(handle), 2)]
 
 
