@@ -15,14 +15,19 @@ from rsart.errors import RsartError
 DB_HELP = "result store: a SQLAlchemy URL (e.g. postgresql://user@host/db) or a SQLite file path"
 
 
-def _positive(s: str) -> int:
-    try:
-        v = int(s)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{s!r} is not an integer") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError("must be >= 1")
-    return v
+def _at_least(lo: int):
+    def parse(s: str) -> int:
+        try:
+            v = int(s)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{s!r} is not an integer") from None
+        if v < lo:
+            raise argparse.ArgumentTypeError(f"must be >= {lo}")
+        return v
+    return parse
+
+
+_positive = _at_least(1)
 
 
 def _add(args) -> int:
@@ -123,7 +128,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--work", type=Path, help="uploads and scores folder (default: <db file>-work beside a SQLite db)")
     s.add_argument("--host", default="127.0.0.1")
     s.add_argument("--port", type=int, default=8000)
-    s.add_argument("--workers", type=_positive, default=2, help="scoring processes (default 2)")
+    s.add_argument("--workers", type=_at_least(0), default=2,
+                   help="scoring processes (default 2; 0 = accept and queue uploads, score them later)")
     s.add_argument("--max-upload-mb", type=float, default=200.0, help="largest zip accepted (default 200)")
     s.add_argument("--max-unpacked-mb", type=float, default=1024.0, help="largest unpacked size (default 1024)")
     s.add_argument("--max-mesh-mb", type=float, default=200.0, help="largest mesh file (default 200)")

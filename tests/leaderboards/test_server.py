@@ -144,13 +144,18 @@ N_CRASH = 8
 def test_kill_mid_queue_and_restart_finishes_every_job(one_object, gt_sub, tmp_path):
     db = tmp_path / "lb.db"
     tok = create_token(open_engine(str(db)), "team-crash", 100)
+    # the queue is filled by a server without workers, so no job can finish before the kill (with a worker
+    # running during the uploads, a loaded machine let it keep pace and finish all of them: flaky)
+    queue = Server(db, one_object, tmp_path / "work", workers=0).start()
+    try:
+        datas = [zip_folder(gt_sub, method=f"crash-{i}") for i in range(N_CRASH)]
+        with ThreadPoolExecutor(max_workers=4) as ex:
+            ids = [r.json()["job_id"] for r in ex.map(lambda d: queue.upload(tok, d, timeout=120), datas)]
+        assert all(httpx.get(f"{queue.url}/api/jobs/{j}").json()["status"] == "queued" for j in ids)
+    finally:
+        queue.kill()
     srv = Server(db, one_object, tmp_path / "work", workers=1).start()
     try:
-        # uploads in parallel so the queue is full before the single worker gets far (sequential uploads on a
-        # loaded machine let the worker keep pace and finish all 6 before the kill)
-        datas = [zip_folder(gt_sub, method=f"crash-{i}") for i in range(N_CRASH)]
-        with ThreadPoolExecutor(max_workers=N_CRASH) as ex:
-            ids = [r.json()["job_id"] for r in ex.map(lambda d: srv.upload(tok, d, timeout=120), datas)]
         deadline = time.monotonic() + 60
         while time.monotonic() < deadline:  # kill while a job is being scored
             if httpx.get(f"{srv.url}/api/jobs/{ids[0]}").json()["status"] in ("running", "done"):
