@@ -1,5 +1,6 @@
 """TSDF fusion of exact ray-cast depth of a known box, and Gaussian depth rendering of a known plane."""
 import numpy as np
+import pytest
 import trimesh
 
 from pd2gs.discovery.meshing import clean_mesh, render_depth, tsdf_fuse
@@ -54,3 +55,20 @@ def test_rendered_gaussian_depth_of_a_plane():
     centre = depth[12:36, 16:48]
     assert (alpha[12:36, 16:48] > 0.99).all()
     assert np.abs(centre - 1.0).max() < 1e-3
+
+
+@pytest.mark.parametrize("case", ["one pixel", "nan", "inf", "negative"])
+def test_degenerate_depth_gives_an_empty_mesh_not_an_error(case):
+    """A part seen in a pixel or two (open3d aborts: "No block is touched"), or non-finite depth, once made
+    a whole object fail (eyeglasses_rs-0001 in the suite run)."""
+    cam = Camera(Intrinsics(64, 48, 50.0, 50.0, 31.5, 23.5, None), np.eye(4))
+    d = np.zeros((48, 64))
+    d[10, 10] = 1.0
+    if case != "one pixel":
+        d[10:20, 10:20] = {"nan": np.nan, "inf": np.inf, "negative": -1.0}[case]
+    mesh = tsdf_fuse([d, d], [cam, cam], 0.01)
+    assert len(mesh.faces) == 0
+    plane = np.zeros((48, 64))
+    plane[10:40, 10:50] = 1.0
+    plane[20, 20] = np.nan if case == "nan" else plane[20, 20]
+    assert len(tsdf_fuse([plane, plane], [cam, cam], 0.01).faces) > 1000  # a bad pixel costs one pixel
