@@ -35,19 +35,26 @@ def _scene(jtype: str, n: int = 1500):
         M.append(m)
         Q.append(quats)
     fld = StateField(list(STATES), np.stack(M), np.stack(Q), np.tile(scales, (4, 1, 1)), colors, opac)
+    return fld, labels, _capture(fld), truth
+
+
+def _cameras() -> list[Camera]:
     cams = []
     for K, w2c in ring_cameras(10, W, H):
         K = K.numpy()
         cams.append(Camera(Intrinsics(W, H, float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2]), None),
                            np.linalg.inv(w2c.numpy().astype(np.float64))))
+    return cams
+
+
+def _capture(fld: StateField):
+    """The 'captured' training views: every state of ``fld`` rendered by the real rasterizer (uint8 RGB)."""
     f32 = lambda a: torch.as_tensor(np.ascontiguousarray(a), dtype=torch.float32)  # noqa: E731
-    views = []
     with torch.no_grad():
-        for k in range(4):
-            views.append([(c, (rasterize(f32(fld.means[k]), f32(quats), f32(scales), f32(colors), f32(opac), f32(c.K),
-                                         f32(c.w2c), W, H, background=torch.tensor(BG)).rgb.clamp(0, 1).numpy()
-                               * 255).round().astype(np.uint8)) for c in cams])
-    return fld, labels, views, truth
+        return [[(c, (rasterize(f32(fld.means[k]), f32(fld.quats[k]), f32(fld.scales[k]), f32(fld.colors),
+                                f32(fld.opacities), f32(c.K), f32(c.w2c), W, H,
+                                background=torch.tensor(BG)).rgb.clamp(0, 1).numpy() * 255).round().astype(np.uint8))
+                 for c in _cameras()] for k in range(fld.k)]
 
 
 def _wrong_start(jtype: str, truth: dict) -> JointEstimate:
@@ -161,15 +168,7 @@ def _chained_scene(n: int = 2000):
         M.append(m)
         Q.append(quats)  # isotropic Gaussians: rotation does not change them
     fld = StateField(list(STATES), np.stack(M), np.stack(Q), np.tile(scales, (4, 1, 1)), colors, opac)
-    _, _, views, _ = _scene("revolute", n=10)  # only for the cameras
-    f32 = lambda a: torch.as_tensor(np.ascontiguousarray(a), dtype=torch.float32)  # noqa: E731
-    out = []
-    with torch.no_grad():
-        for k in range(4):
-            out.append([(c, (rasterize(f32(fld.means[k]), f32(quats), f32(scales), f32(colors), f32(opac), f32(c.K),
-                                       f32(c.w2c), W, H, background=torch.tensor(BG)).rgb.clamp(0, 1).numpy()
-                             * 255).round().astype(np.uint8)) for c, _ in views[k]])
-    return fld, labels, out
+    return fld, labels, _capture(fld)
 
 
 def test_chained_part_is_fitted_relative_to_its_parent():
@@ -206,12 +205,7 @@ def test_parts_on_the_base_stay_unchained():
             m[labels == lab] = means[labels == lab] @ T[:3, :3].T + T[:3, 3]
         M.append(m)
     fld = StateField(list(STATES), np.stack(M), np.tile(quats, (4, 1, 1)), np.tile(scales, (4, 1, 1)), colors, opac)
-    _, _, cams, _ = _scene("revolute", n=10)
-    f32 = lambda a: torch.as_tensor(np.ascontiguousarray(a), dtype=torch.float32)  # noqa: E731
-    with torch.no_grad():
-        views = [[(c, (rasterize(f32(fld.means[k]), f32(quats), f32(scales), f32(colors), f32(opac), f32(c.K),
-                                 f32(c.w2c), W, H, background=torch.tensor(BG)).rgb.clamp(0, 1).numpy()
-                       * 255).round().astype(np.uint8)) for c, _ in cams[k]] for k in range(4)]
+    views = _capture(fld)
     start = {1: _wrong_start("revolute", back), 2: _wrong_start("revolute", front)}
     out, _, diag = fit_articulation(fld, labels, start, views, "m0", "m3",
                                     CHAIN, BG)
