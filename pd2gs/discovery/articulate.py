@@ -25,6 +25,9 @@ state with the L1 photometric loss, in four steps:
    its parent's followed by its own joint, whose axis and pivot are given at the reference state); the
    chain is kept when it lowers the error over the part's own pixels by ``chain_margin``. The submitted
    joint of a chained part is then relative to its parent, as the benchmark's ground truth is.
+3c. parts the images do not support: a part whose own pixels render no worse with its joint held still
+   joins the static base; two touching parts one of whose joints moves both as well merge (a field that
+   does not move a part rigidly splits it into several k-means clusters).
 4. relabelling: each Gaussian takes the part under whose motion its colour agrees best with the
    captured pixels in the other states (multi-view colour consistency), then step 2 again.
 
@@ -35,7 +38,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import torch
@@ -75,6 +78,10 @@ class FitSettings:
     photo_depth_tol: float = 0.01  # x scene extent: visible when no deeper than the rendered surface + tol
     photo_free_err: float = 0.25   # least error of a position in front of the rendered surface (empty space)
     chain: bool = True           # try each part as hanging from a touching movable part (lamp arms, handles)
+    prune: bool = True           # parts the images show still join the base; touching parts one joint moves merge
+    prune_margin: float = 0.01   # held still, a part's pixels may render this much worse and it is still static
+    merge_iters: int = 100       # Adam steps re-fitting one joint to a candidate merged pair
+    merge_margin: float = 0.02   # merged under one joint, two parts' pixels may render this much worse
     chain_touch: float = 0.03    # x scene extent: parts closer than this touch (candidate parents)
     chain_margin: float = 0.05   # the chained fit must lower the part's own pixel error by this fraction
 
@@ -349,9 +356,15 @@ def _part_losses(ref, groups, configs: list[list[_Joint]], label: int, views: Vi
     """Mean |colour error| of each joint configuration over the pixels part ``label`` covers (its Gaussians
     rendered alone, alpha > 0.3) under any of the configurations, on the held-out views. A whole-image loss
     would hide a small part such as a handle."""
+    return _footprint_losses(ref, [(groups, js) for js in configs], groups[label], views, held, bg, backend)
+
+
+def _footprint_losses(ref, configs: list[tuple[dict[int, torch.Tensor], list[_Joint]]], idx: torch.Tensor,
+                      views: Views, held: list[tuple[int, int]], bg, backend: str) -> list[float]:
+    """As :func:`_part_losses` for configurations that also differ in their groups (label -> Gaussian
+    indices); ``idx``: the Gaussians whose footprint is scored."""
     from pd2gs.render import rasterize
 
-    idx = groups[label]
     err, cnt = np.zeros(len(configs)), 0
     with torch.no_grad():
         for k, i in held:
@@ -359,7 +372,7 @@ def _part_losses(ref, groups, configs: list[list[_Joint]], label: int, views: Vi
             K, w2c = torch.as_tensor(cam.K, dtype=torch.float32), torch.as_tensor(cam.w2c, dtype=torch.float32)
             gt = torch.as_tensor(rgb, dtype=torch.float32) / 255.0
             outs, mask = [], torch.zeros(cam.height, cam.width, dtype=torch.bool)
-            for js in configs:
+            for groups, js in configs:
                 means, quats = _pose(ref, groups, js, k)
                 outs.append(rasterize(means, quats, ref["scales"], ref["colors"], ref["opacities"], K, w2c, cam.width,
                                       cam.height, background=bg, backend=backend).rgb)
@@ -370,6 +383,74 @@ def _part_losses(ref, groups, configs: list[list[_Joint]], label: int, views: Vi
             for c, out in enumerate(outs):
                 err[c] += float((out - gt).abs().mean(-1)[mask].sum())
     return list(err / max(cnt, 1))
+
+
+def _prune_and_merge(ref, labels: np.ndarray, joints: list[_Joint], fld: StateField, r: int, views: Views,
+                     held: list[tuple[int, int]], train: list[tuple[int, int]], s: FitSettings, scale: float, bg,
+                     backend: str, rng: np.random.Generator) -> tuple[np.ndarray, list[_Joint], dict]:
+    """Parts the images do not support (ours): a trained field that does not move a part rigidly splits it
+    into several k-means clusters, and adds clusters that hardly move. On the held-out views, over the
+    parts' own pixels:
+
+    * a part whose pixels render no worse (``prune_margin``) with its joint held still joins the static base;
+    * two touching parts of one joint type merge when one of their joints, re-fitted to both, moves both
+      no worse (``merge_margin``), the pair that loses least first.
+
+    Parts in a chain (a parent or a child) are left as they are. Identical motions cannot be told apart,
+    so equal drawers that always move together merge too. -> (labels, joints, {"pruned", "merged"}).
+    """
+    labels = np.asarray(labels).copy()
+    joints = list(joints)
+    diag: dict = {"pruned": [], "merged": []}
+    groups = lambda: {j.label: torch.as_tensor(np.flatnonzero(labels == j.label), dtype=torch.long)  # noqa: E731
+                      for j in joints}
+    chained = {j.label for j in joints if j.parent is not None} | {j.parent for j in joints if j.parent is not None}
+    for j in list(joints):
+        if j.label in chained:
+            continue
+        g = groups()
+        still = _Joint(j.label, j.type, j.axis.detach(), j.pivot.detach(), torch.zeros_like(j.values), None)
+        moved, held_still = _footprint_losses(ref, [(g, joints), (g, [still if x is j else x for x in joints])],
+                                              g[j.label], views, held, bg, backend)
+        if held_still <= moved * (1 + s.prune_margin):
+            labels[labels == j.label] = 0
+            joints.remove(j)
+            diag["pruned"].append({"part": j.label, "moving": moved, "still": held_still})
+    while True:
+        free = [j for j in joints if j.label not in chained]
+        near = _touching(fld, labels, [j.label for j in free], r, s.chain_touch * scale)
+        g = groups()
+        best = None
+        for a in free:
+            for b in free:
+                if a.label >= b.label or b.label not in near.get(a.label, []) or a.type != b.type:
+                    continue
+                both = torch.cat([g[a.label], g[b.label]])
+                trials, fits = [(g, joints)], []
+                for keep, drop in ((a, b), (b, a)):
+                    gm = {k: v for k, v in g.items() if k != drop.label}
+                    gm[keep.label] = both
+                    fit = _Joint(keep.label, keep.type, keep.axis.detach().clone(), keep.pivot.detach().clone(),
+                                 keep.values.detach().clone(), None)
+                    for t in (fit.axis, fit.pivot, fit.values):
+                        t.requires_grad_(True)
+                    js = [fit if x is keep else x for x in joints if x is not drop]
+                    _optimise(ref, gm, js, views, r, replace(s, iters=s.merge_iters), scale, bg, backend, rng, train,
+                              learn=[fit])
+                    trials.append((gm, js))
+                    fits.append((keep, drop, fit))
+                sep, *merged = _footprint_losses(ref, trials, both, views, held, bg, backend)
+                c = int(np.argmin(merged))
+                ratio = merged[c] / max(sep, 1e-12)
+                if ratio <= 1 + s.merge_margin and (best is None or ratio < best[0]):
+                    best = (ratio, *fits[c], sep, merged[c])
+        if best is None:
+            break
+        _, keep, drop, fit, sep, merged = best
+        labels[labels == drop.label] = keep.label
+        joints = [fit if x is keep else x for x in joints if x is not drop]
+        diag["merged"].append({"into": keep.label, "part": drop.label, "separate": sep, "merged": merged})
+    return labels, joints, diag
 
 
 def _ancestors(joints: list[_Joint], label: int) -> set[int]:
@@ -399,43 +480,58 @@ def _held_out_loss(ref, groups, joints, views: Views, held: list[tuple[int, int]
                               for k, i in held]))
 
 
-def _to_estimate(j: _Joint, base: JointEstimate, state_ids: list[str], ref: int, end: str | None,
-                 centroid: np.ndarray, diag: dict) -> JointEstimate:
-    u = j.axis.detach().double().numpy()
+def _to_estimate(j: _Joint, base: JointEstimate, state_ids: list[str], zero: int, end: str | None,
+                 centroid: np.ndarray, diag: dict, frame: tuple[np.ndarray, np.ndarray] | None = None
+                 ) -> JointEstimate:
+    """The submitted joint: values relative to state index ``zero``; ``frame`` = (R, t) maps the fit's
+    reference-state world frame to the submitted one (a chained joint's parent pose at the start state)."""
+    R, t = frame if frame is not None else (np.eye(3), np.zeros(3))
+    u = R @ j.axis.detach().double().numpy()
     u = u / (np.linalg.norm(u) + EPS)
+    centroid = R @ centroid + t
     vals = j.values.detach().double().numpy()
-    vals = vals - vals[ref]
+    vals = vals - vals[zero]
     if j.type == "revolute":  # states are captured in order and move < 180 deg apart: undo the grid's wrap
         vals = np.unwrap(vals)
-        vals = vals - vals[ref]
-        o = j.pivot.detach().double().numpy()
+        vals = vals - vals[zero]
+        o = R @ j.pivot.detach().double().numpy() + t
         origin = o + u * float(u @ (centroid - o))  # the point on the axis closest to the part
     else:
         origin = centroid
     far = int(np.argmax(np.abs(vals)))
-    sign_k = state_ids.index(end) if end in state_ids and end != state_ids[ref] else far
+    sign_k = state_ids.index(end) if end in state_ids and end != state_ids[zero] else far
     if vals[sign_k] < 0:
         u, vals = -u, -vals
     return JointEstimate(j.type, u, origin, {s: float(v) for s, v in zip(state_ids, vals)}, "photometric",
                          base.type_paper, base.type_bic, {**base.diagnostics, **diag})
 
 
+def _rezero(je: JointEstimate, state_ids: list[str], z: int) -> JointEstimate:
+    """A centre-based estimate with its values relative to state index ``z`` (a world-frame joint's axis
+    and pivot do not depend on the state they are read in)."""
+    v0 = je.values.get(state_ids[z], 0.0)
+    return replace(je, values={s: v - v0 for s, v in je.values.items()})
+
+
 def fit_articulation(fld: StateField, labels: np.ndarray, joints: dict[int, JointEstimate], views: Views,
                      ref: str, end: str | None = None, settings: FitSettings | None = None,
-                     background: tuple[float, float, float] | None = None, backend: str = "cpu", seed: int = 0
-                     ) -> tuple[dict[int, JointEstimate], np.ndarray, dict]:
+                     background: tuple[float, float, float] | None = None, backend: str = "cpu", seed: int = 0,
+                     start: str | None = None) -> tuple[dict[int, JointEstimate], np.ndarray, dict]:
     """Refine every part's joint (and, with ``settings.choose_type``, its type) photometrically.
 
     fld: the K-state field (its reference state ``ref`` supplies the Gaussians); labels (N,) part label
     per Gaussian (0 static); joints: label -> centre-based estimate (the start values); views[k] are
-    training views of ``fld.state_ids[k]``. -> (label -> refined JointEstimate, labels (N,) after the soft
-    relabelling (the input labels when ``settings.relabel`` is False), diagnostics).
+    training views of ``fld.state_ids[k]``; ``start`` (default ``ref``): the state whose world frame and
+    values the returned joints use (a chained joint relative to its parent posed at ``start``).
+    -> (label -> refined JointEstimate, labels (N,) after the soft relabelling (the input labels when
+    ``settings.relabel`` is False), diagnostics).
     """
     s = settings or FitSettings()
     if not joints:
         return {}, np.asarray(labels), {}
     rng = np.random.default_rng(seed)
     r = fld.index(ref)
+    z = fld.index(start) if start is not None else r  # the submitted joints' frame and zero
     f32 = lambda a: torch.as_tensor(np.ascontiguousarray(a), dtype=torch.float32)  # noqa: E731
     refg = {"means": f32(fld.means[r]), "quats": f32(fld.quats[r]), "scales": f32(fld.scales[r]),
             "colors": f32(fld.colors), "opacities": f32(fld.opacities)}
@@ -482,9 +578,15 @@ def fit_articulation(fld: StateField, labels: np.ndarray, joints: dict[int, Join
             diag["search"][p] = {t: v[1] for t, v in found.items()}
         lap("search")
     _optimise(refg, groups, cur, views, r, s, scale, bg, backend, rng, train)
+    lap("fit")
+    labels = np.asarray(labels).copy()
+    if s.prune and cur:  # before the type trials and chains: those would only fit clusters that are not parts
+        labels, cur, diag["prune"] = _prune_and_merge(refg, labels, cur, fld, r, views, held, train, s, scale, bg,
+                                                      backend, rng)
+        groups = {j.label: torch.as_tensor(np.flatnonzero(labels == j.label), dtype=torch.long) for j in cur}
+        lap("prune")
     best = _held_out_loss(refg, groups, cur, views, held, bg, backend)
     diag["loss_fit"] = best
-    lap("fit")
     diag["type_trials"] = {}
     if s.choose_type:
         for i, j in enumerate(list(cur)):
@@ -536,24 +638,27 @@ def fit_articulation(fld: StateField, labels: np.ndarray, joints: dict[int, Join
         lap("relabel+refit")
     # a part keeps its centre-based joint when the images do not prefer the fitted one (e.g. a field whose
     # colours do not reproduce the captures): the fit never makes a joint photometrically worse
-    start = {p: _init_joint(je, p, fld.state_ids, r) for p, je in joints.items()}
+    centre = {p: _init_joint(je, p, fld.state_ids, r) for p, je in joints.items()}
     kept = []
     for i, j in enumerate(list(cur)):
-        trial = cur[:i] + [start[j.label]] + cur[i + 1:]
+        trial = cur[:i] + [centre[j.label]] + cur[i + 1:]
         loss = _held_out_loss(refg, groups, trial, views, held, bg, backend)
         if loss <= best:
             cur, best = trial, loss
             kept.append(j.label)
     diag["kept_centre_joints"] = kept
+    with torch.no_grad():
+        at_start = {p: (R.double().numpy(), t.double().numpy()) for p, (R, t, _) in _world_motions(cur, z).items()}
     out = {}
     for j in cur:
         if j.label in kept:
-            out[j.label] = joints[j.label]
+            out[j.label] = _rezero(joints[j.label], fld.state_ids, z)
             continue
         sel = labels == j.label
         P = fld.means[r][sel] if sel.sum() >= 3 else Qs[j.label][r]
-        out[j.label] = _to_estimate(j, joints[j.label], fld.state_ids, r, end, P.mean(0),
+        out[j.label] = _to_estimate(j, joints[j.label], fld.state_ids, z, end, P.mean(0),
                                     {"photometric_loss": best, "type_centres": joints[j.label].type,
-                                     "parent": j.parent})
+                                     "parent": j.parent, "reference_state": fld.state_ids[r]},
+                                    at_start.get(j.parent))
     diag["loss_final"] = best
     return out, labels, diag

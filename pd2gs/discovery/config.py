@@ -14,6 +14,8 @@ Ablation switches (docs/pd2gs-parts.md has the table):
 * ``split_disconnected`` — ours: split each motion cluster into spatially connected pieces.
 * ``articulate``      — ours: photometric refinement of joints and joint types (False = paper's joints).
 * ``chain``           — ours, inside the articulation fit: chained joints relative to their parent part.
+* ``prune``           — ours, inside the articulation fit: still parts join the base, over-split parts merge.
+* ``articulate_ref``  — ours: the state whose Gaussians the articulation fit moves ("start" | "end").
 * ``cluster``         — "trajectory" (paper) | "rigid" (ours): how dynamic Gaussians are grouped into parts.
 """
 from __future__ import annotations
@@ -24,6 +26,7 @@ COUNTERS = ("trajectory", "motion", "vlm", "given")
 MASK_PROVIDERS = ("grabcut", "sam", "oracle")
 JOINT_RULES = ("paper", "bic")
 CLUSTERINGS = ("trajectory", "rigid")
+ARTICULATE_REFS = ("start", "end")
 
 
 @dataclass
@@ -100,9 +103,13 @@ class DiscoveryConfig:
     articulate_iters: int = 300      # Adam steps per fit (the type trial fits once more per part)
     articulate_views: int = 24       # training views per state (evenly spaced)
     articulate_max_side: int = 160   # those views are rendered at most this large (the trainer's size)
+    articulate_ref: str = "start"    # ours: the state whose Gaussians are articulated ("start" | "end");
+                                     # "end" suits objects folded or closed at the start (parts hidden there)
     relabel: bool = True             # ours: after the fit, relabel Gaussians by multi-view colour consistency
-    chain: bool = True               # ours: try each part as hanging from a touching movable part
                                      # under each part's motion, then re-fit the joints
+    chain: bool = True               # ours: try each part as hanging from a touching movable part
+    prune: bool = True               # ours: parts the images show still join the base; touching parts that
+                                     # one joint moves as well merge (an over-split rigid part)
 
     # --- meshing (paper App. A.2)
     voxel_size: float | None = None  # None: object extent / 128
@@ -121,6 +128,8 @@ class DiscoveryConfig:
             raise ValueError(f"counter={self.counter!r}: choose one of {COUNTERS}")
         if self.mask_provider not in MASK_PROVIDERS:
             raise ValueError(f"mask_provider={self.mask_provider!r}: choose one of {MASK_PROVIDERS}")
+        if self.articulate_ref not in ARTICULATE_REFS:
+            raise ValueError(f"articulate_ref={self.articulate_ref!r}: choose one of {ARTICULATE_REFS}")
         if self.joint_rule not in JOINT_RULES:
             raise ValueError(f"joint_rule={self.joint_rule!r}: choose one of {JOINT_RULES}")
         if self.n_states is not None and self.n_states < 2:

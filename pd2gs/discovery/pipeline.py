@@ -179,9 +179,9 @@ def articulate_joints(fld: StateField, labels: np.ndarray, joints: dict, obj, cf
     views = [[(cam, _resize(view.rgb, cam)) for _, cam, view in
               pick_views(obj, s, cfg.articulate_views, cfg.articulate_max_side)] for s in fld.state_ids]
     ev = obj.meta.eval_states
-    settings = FitSettings(iters=cfg.articulate_iters, relabel=cfg.relabel, chain=cfg.chain)
-    return fit_articulation(fld, labels, joints, views, ev["start"], ev["end"], settings, cfg.background,
-                            cfg.render_backend, cfg.seed)
+    settings = FitSettings(iters=cfg.articulate_iters, relabel=cfg.relabel, chain=cfg.chain, prune=cfg.prune)
+    return fit_articulation(fld, labels, joints, views, ev[cfg.articulate_ref], ev["end"], settings, cfg.background,
+                            cfg.render_backend, cfg.seed, start=ev["start"])
 
 
 # ----------------------------------------------------------------------------- the pipeline

@@ -171,13 +171,15 @@ def _chained_scene(n: int = 2000):
     return fld, labels, _capture(fld)
 
 
-def test_chained_part_is_fitted_relative_to_its_parent():
+@pytest.mark.parametrize("ref", ["m0", "m3"])
+def test_chained_part_is_fitted_relative_to_its_parent(ref):
+    """Fitted from either state's Gaussians, the joints come out in the start state's frame, zero there."""
     fld, labels, views = _chained_scene()
     # the flap's start: the world-frame estimate a centre-based fit gives (the lid's hinge, summed values)
     world = JointEstimate("revolute", HINGE["axis"], HINGE["origin"],
                           {s: v for s, v in zip(STATES, HINGE["values"])}, "bic", "revolute", "revolute")
-    out, _, diag = fit_articulation(fld, labels, {1: _wrong_start("revolute", HINGE), 2: world}, views, "m0", "m3",
-                                    CHAIN, BG)
+    out, _, diag = fit_articulation(fld, labels, {1: _wrong_start("revolute", HINGE), 2: world}, views, ref, "m3",
+                                    CHAIN, BG, start="m0")
     assert diag["chain_trials"]["2<-1"]["kept"], diag["chain_trials"]
     assert not diag["chain_trials"].get("1<-2", {}).get("kept", False)
     flap, lid = out[2], out[1]
@@ -211,6 +213,43 @@ def test_parts_on_the_base_stay_unchained():
                                     CHAIN, BG)
     assert diag["chain_trials"], "the halves touch, so both chains are tried"
     assert not any(t["kept"] for t in diag["chain_trials"].values()), diag["chain_trials"]
+    assert diag["prune"] == {"pruned": [], "merged": []}, diag["prune"]  # two real parts: neither merged nor still
     for lab, j in ((1, back), (2, front)):
         assert out[lab].diagnostics["parent"] is None
         assert _axis_err(out[lab].axis, j["axis"]) < 2.0
+
+
+PRUNE = FitSettings(iters=100, relabel=False, search_views=1, choose_type=False, chain=False, angle_steps=16,
+                    pivot_steps=5)
+
+
+def test_an_over_split_part_is_merged_back():
+    """The lid cut into two clusters (what a field that does not move it rigidly gives k-means): one joint
+    moves both as well as two, so they merge into one part with the true hinge."""
+    fld, labels, views, truth = _scene("revolute", n=1500)
+    split = labels.copy()
+    split[(labels == 1) & (fld.means[0][:, 0] > 0.0)] = 2
+    start = {1: _wrong_start("revolute", truth), 2: _wrong_start("revolute", truth)}
+    out, new_labels, diag = fit_articulation(fld, split, start, views, "m0", "m3", PRUNE, BG)
+    assert len(diag["prune"]["merged"]) == 1 and not diag["prune"]["pruned"], diag["prune"]
+    (lab, j), = out.items()
+    assert set(np.unique(new_labels[labels == 1])) == {lab}
+    assert np.all(new_labels[labels == 0] == 0)
+    assert _axis_err(j.axis, truth["axis"]) < 2.0
+    assert _line_dist(j.origin, j.axis, truth["origin"], truth["axis"]) < 0.01
+
+
+def test_a_still_cluster_joins_the_base():
+    """A piece of the base labelled as a third part (a cluster of Gaussians the field jitters): held still
+    it renders no worse, so it joins the static base and the lid keeps its joint."""
+    fld, labels, views, truth = _scene("revolute", n=1500)
+    given = labels.copy()
+    piece = (labels == 0) & (fld.means[0][:, 0] > 0.1)
+    given[piece] = 2
+    jitter = JointEstimate("revolute", np.array([0.0, 0.0, 1.0]), fld.means[0][piece].mean(0),
+                           {s: 0.02 * i for i, s in enumerate(STATES)}, "bic", "revolute", "revolute")
+    out, new_labels, diag = fit_articulation(fld, given, {1: _wrong_start("revolute", truth), 2: jitter}, views,
+                                             "m0", "m3", PRUNE, BG)
+    assert [d["part"] for d in diag["prune"]["pruned"]] == [2], diag["prune"]
+    assert list(out) == [1] and np.all(new_labels[piece] == 0)
+    assert _axis_err(out[1].axis, truth["axis"]) < 2.0
