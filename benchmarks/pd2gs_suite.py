@@ -45,7 +45,7 @@ ABLATIONS = {  # name -> DiscoveryConfig overrides (same trained field)
     "2-states": {"n_states": 2},
     "no-chain": {"chain": False},  # every joint in the world frame (no parent part)
     "rigid-cluster": {"cluster": "rigid"},  # our rigid-motion clustering instead of the paper's descriptor
-    "no-prune": {"prune": False},  # keep still clusters and over-split parts as parts
+    "prune": {"prune": True},  # still clusters join the base, over-split parts merge (ours, off by default)
     "ref-end": {"articulate_ref": "end"},  # articulate the end state's Gaussians (parts folded at the start)
 }
 

@@ -78,7 +78,7 @@ class FitSettings:
     photo_depth_tol: float = 0.01  # x scene extent: visible when no deeper than the rendered surface + tol
     photo_free_err: float = 0.25   # least error of a position in front of the rendered surface (empty space)
     chain: bool = True           # try each part as hanging from a touching movable part (lamp arms, handles)
-    prune: bool = True           # parts the images show still join the base; touching parts one joint moves merge
+    prune: bool = False          # parts the images show still join the base; touching parts one joint moves merge
     prune_margin: float = 0.01   # held still, a part's pixels may render this much worse and it is still static
     merge_iters: int = 100       # Adam steps re-fitting one joint to a candidate merged pair
     merge_margin: float = 0.02   # merged under one joint, two parts' pixels may render this much worse

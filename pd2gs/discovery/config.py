@@ -108,7 +108,7 @@ class DiscoveryConfig:
     relabel: bool = True             # ours: after the fit, relabel Gaussians by multi-view colour consistency
                                      # under each part's motion, then re-fit the joints
     chain: bool = True               # ours: try each part as hanging from a touching movable part
-    prune: bool = True               # ours: parts the images show still join the base; touching parts that
+    prune: bool = False              # ours (off: see docs): parts the images show still join the base; touching parts that
                                      # one joint moves as well merge (an over-split rigid part)
 
     # --- meshing (paper App. A.2)

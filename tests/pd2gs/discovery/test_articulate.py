@@ -1,5 +1,6 @@
 """Photometric articulation fit: known rigid motions rendered by the real rasterizer are recovered from a
 wrong start (axis, pivot, values, even the type), and mislabelled Gaussians go back to their part."""
+import dataclasses
 import math
 
 import numpy as np
@@ -149,8 +150,9 @@ def test_unknown_reference_state_is_named(bad):
 
 # A flap hinged on the lid (the lid's right end, x > 0.1, folding about the lid's y direction at x = 0.1):
 # in the world it moves by the lid's hinge and then its own, like a door handle or a lamp's upper arm.
-CHAIN = FitSettings(iters=120, relabel=False, search_views=1, choose_type=False, angle_steps=16,
-                    pivot_steps=5)  # types have their own tests; a coarser search keeps these quick
+CHAIN = FitSettings(iters=120, relabel=False, search_views=1, choose_type=False, angle_steps=16, prune=False,
+                    pivot_steps=5)  # types have their own tests; a coarser search keeps these quick; pruning merged the
+# flap into the lid here (a known limit, docs/pd2gs-parts.md), so the chain tests run without it
 FLAP = {"axis": np.array([0.0, 1.0, 0.0]), "origin": np.array([0.1, 0.0, 0.42]), "values": [0.0, 0.3, 0.6, 0.9]}
 
 
@@ -210,7 +212,7 @@ def test_parts_on_the_base_stay_unchained():
     views = _capture(fld)
     start = {1: _wrong_start("revolute", back), 2: _wrong_start("revolute", front)}
     out, _, diag = fit_articulation(fld, labels, start, views, "m0", "m3",
-                                    CHAIN, BG)
+                                    dataclasses.replace(CHAIN, prune=True), BG)
     assert diag["chain_trials"], "the halves touch, so both chains are tried"
     assert not any(t["kept"] for t in diag["chain_trials"].values()), diag["chain_trials"]
     assert diag["prune"] == {"pruned": [], "merged": []}, diag["prune"]  # two real parts: neither merged nor still
@@ -219,7 +221,7 @@ def test_parts_on_the_base_stay_unchained():
         assert _axis_err(out[lab].axis, j["axis"]) < 2.0
 
 
-PRUNE = FitSettings(iters=100, relabel=False, search_views=1, choose_type=False, chain=False, angle_steps=16,
+PRUNE = FitSettings(iters=100, relabel=False, search_views=1, choose_type=False, chain=False, angle_steps=16, prune=True,
                     pivot_steps=5)
 
 
