@@ -396,18 +396,15 @@ def _prune_and_merge(ref, labels: np.ndarray, joints: list[_Joint], fld: StateFi
     * two touching parts of one joint type merge when one of their joints, re-fitted to both, moves both
       no worse (``merge_margin``), the pair that loses least first.
 
-    Parts in a chain (a parent or a child) are left as they are. Identical motions cannot be told apart,
-    so equal drawers that always move together merge too. -> (labels, joints, {"pruned", "merged"}).
+    It runs before the chain step, so every joint hangs from the base. Identical motions cannot be told
+    apart, so equal drawers that always move together merge too. -> (labels, joints, {"pruned", "merged"}).
     """
     labels = np.asarray(labels).copy()
     joints = list(joints)
     diag: dict = {"pruned": [], "merged": []}
     groups = lambda: {j.label: torch.as_tensor(np.flatnonzero(labels == j.label), dtype=torch.long)  # noqa: E731
                       for j in joints}
-    chained = {j.label for j in joints if j.parent is not None} | {j.parent for j in joints if j.parent is not None}
     for j in list(joints):
-        if j.label in chained:
-            continue
         g = groups()
         still = _Joint(j.label, j.type, j.axis.detach(), j.pivot.detach(), torch.zeros_like(j.values), None)
         moved, held_still = _footprint_losses(ref, [(g, joints), (g, [still if x is j else x for x in joints])],
@@ -417,12 +414,11 @@ def _prune_and_merge(ref, labels: np.ndarray, joints: list[_Joint], fld: StateFi
             joints.remove(j)
             diag["pruned"].append({"part": j.label, "moving": moved, "still": held_still})
     while True:
-        free = [j for j in joints if j.label not in chained]
-        near = _touching(fld, labels, [j.label for j in free], r, s.chain_touch * scale)
+        near = _touching(fld, labels, [j.label for j in joints], r, s.chain_touch * scale)
         g = groups()
         best = None
-        for a in free:
-            for b in free:
+        for a in joints:
+            for b in joints:
                 if a.label >= b.label or b.label not in near.get(a.label, []) or a.type != b.type:
                     continue
                 both = torch.cat([g[a.label], g[b.label]])
@@ -627,7 +623,6 @@ def fit_articulation(fld: StateField, labels: np.ndarray, joints: dict[int, Join
                     cur, j = trial, alt
         best = _held_out_loss(refg, groups, cur, views, held, bg, backend)
         lap("chain")
-    labels = np.asarray(labels).copy()
     if s.relabel:
         new, diag["relabel"] = _relabel_photo(refg, labels, cur, views, r, s, scale, bg, backend)
         diag["relabel_changed"] = int((new != labels).sum())

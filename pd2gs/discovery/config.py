@@ -108,8 +108,8 @@ class DiscoveryConfig:
     relabel: bool = True             # ours: after the fit, relabel Gaussians by multi-view colour consistency
                                      # under each part's motion, then re-fit the joints
     chain: bool = True               # ours: try each part as hanging from a touching movable part
-    prune: bool = False              # ours (off: see docs): parts the images show still join the base; touching parts that
-                                     # one joint moves as well merge (an over-split rigid part)
+    prune: bool = False              # ours, off (docs/pd2gs-parts.md): parts the images show still join the
+                                     # base; touching parts one joint moves as well merge (over-split parts)
 
     # --- meshing (paper App. A.2)
     voxel_size: float | None = None  # None: object extent / 128
