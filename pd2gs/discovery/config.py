@@ -9,7 +9,8 @@ Ablation switches (docs/pd2gs-parts.md has the table):
 * ``refine``          — False: skip the SAM-prompted refinement + boundary-aware splitting.
 * ``n_states``        — 2 or 4 (None = every state of the field): which interaction states are used.
 * ``mask_provider``   — "grabcut" (default) | "sam" | "oracle" (the dataset's true part masks).
-* ``counter``         — "motion" (default) | "vlm" | "given" (oracle count from meta.json).
+* ``counter``         — "trajectory" (default, ours) | "motion" (ours) | "vlm" (the paper's) | "given" (oracle
+  count from meta.json).
 * ``joint_rule``      — "paper" (residual-rank rule) | "bic" (ours: translation vs rotation by BIC).
 * ``split_disconnected`` — ours: split each motion cluster into spatially connected pieces.
 * ``articulate``      — ours: photometric refinement of joints and joint types (False = paper's joints).

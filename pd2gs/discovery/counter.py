@@ -1,6 +1,8 @@
 """How many movable parts: pluggable counters (paper Sec. 3.3 asks a VLM; we add a motion counter).
 
-* ``motion`` (default): sequential RANSAC of rigid motions on the dynamic Gaussians' centres across all
+* ``trajectory`` (default): k-means on per-Gaussian local rigid motions, k chosen by silhouette
+  (:func:`count_by_trajectories`).
+* ``motion``: sequential RANSAC of rigid motions on the dynamic Gaussians' centres across all
   states; every rigid motion supported by at least ``min_frac`` of them counts as one part.
 * ``vlm``: the paper's query to an OpenAI-compatible chat-completions endpoint on M image pairs of
   different states; the answer is the mode of the parsed counts (ties -> the smaller count).
