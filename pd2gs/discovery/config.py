@@ -15,8 +15,9 @@ Ablation switches (docs/pd2gs-parts.md has the table):
 * ``split_disconnected`` — ours: split each motion cluster into spatially connected pieces.
 * ``articulate``      — ours: photometric refinement of joints and joint types (False = paper's joints).
 * ``chain``           — ours, inside the articulation fit: chained joints relative to their parent part.
-* ``prune``           — ours, inside the articulation fit: still parts join the base, over-split parts merge.
+* ``absorb``          — ours, inside the articulation fit: clusters another motion (or none) explains as well join it.
 * ``articulate_ref``  — ours: the state whose Gaussians the articulation fit moves ("start" | "end").
+* ``part_ref``        — ours: each part moved from the state that shows it best (False: all from articulate_ref).
 * ``cluster``         — "trajectory" (paper) | "rigid" (ours): how dynamic Gaussians are grouped into parts.
 """
 from __future__ import annotations
@@ -104,13 +105,17 @@ class DiscoveryConfig:
     articulate_iters: int = 300      # Adam steps per fit (the type trial fits once more per part)
     articulate_views: int = 24       # training views per state (evenly spaced)
     articulate_max_side: int = 160   # those views are rendered at most this large (the trainer's size)
-    articulate_ref: str = "start"    # ours: the state whose Gaussians are articulated ("start" | "end");
-                                     # "end" suits objects folded or closed at the start (parts hidden there)
+    articulate_ref: str = "start"    # ours: the state whose Gaussians are articulated ("start" | "end"): the
+                                     # static base's, and every part's when part_ref is off
+    part_ref: bool = True            # ours: each part's Gaussians from the state whose views show it best (a
+                                     # drawer's inside is hidden while it is closed, so its field there is a guess)
     relabel: bool = True             # ours: after the fit, relabel Gaussians by multi-view colour consistency
                                      # under each part's motion, then re-fit the joints
     chain: bool = True               # ours: try each part as hanging from a touching movable part
-    prune: bool = False              # ours, off (docs/pd2gs-parts.md): parts the images show still join the
-                                     # base; touching parts one joint moves as well merge (over-split parts)
+    absorb: bool = True              # ours: a cluster whose pixels another cluster's joint (or none) renders as
+                                     # well joins it, and touching clusters one re-fitted joint moves as well merge
+                                     # (over-split parts, still clusters; pd2gs/discovery/consolidate.py)
+    absorb_margin: float = 0.02      # ours: "as well" = at most this much worse (relative colour error)
 
     # --- meshing (paper App. A.2)
     voxel_size: float | None = None  # None: object extent / 128

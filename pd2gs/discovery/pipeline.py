@@ -24,7 +24,7 @@ from rsart.camera import Camera
 
 from . import motion
 from .config import DiscoveryConfig
-from .counter import CountError, count_by_trajectories, count_rigid_motions, local_rigid_motions, sample_image_pairs, vlm_count
+from .counter import count_by_trajectories, count_rigid_motions, local_rigid_motions, sample_image_pairs, vlm_count
 from .field import StateField, as_state_field
 from .kinematics import estimate_joint
 from .masks import make_provider, sample_prompts, visibility_sets
@@ -179,7 +179,8 @@ def articulate_joints(fld: StateField, labels: np.ndarray, joints: dict, obj, cf
     views = [[(cam, _resize(view.rgb, cam)) for _, cam, view in
               pick_views(obj, s, cfg.articulate_views, cfg.articulate_max_side)] for s in fld.state_ids]
     ev = obj.meta.eval_states
-    settings = FitSettings(iters=cfg.articulate_iters, relabel=cfg.relabel, chain=cfg.chain, prune=cfg.prune)
+    settings = FitSettings(iters=cfg.articulate_iters, relabel=cfg.relabel, chain=cfg.chain, absorb=cfg.absorb,
+                           absorb_margin=cfg.absorb_margin, part_ref=cfg.part_ref)
     return fit_articulation(fld, labels, joints, views, ev[cfg.articulate_ref], ev["end"], settings, cfg.background,
                             cfg.render_backend, cfg.seed, start=ev["start"])
 
