@@ -25,7 +25,6 @@ def estimate_state_poses(object_dir: str | Path, state_id: str, seed: int = 0) -
     """(view id -> (4, 4) c2w in the object frame for the views SfM registered, figures) for one state."""
     sdir = Path(object_dir) / "states" / state_id
     cams = read_cameras(sdir / "cameras.json")
-    K = cams.intrinsics
     images, masks, depths = {}, {}, {}
     for v in cams.views:
         n = f"{v.id}.png"
@@ -35,6 +34,29 @@ def estimate_state_poses(object_dir: str | Path, state_id: str, seed: int = 0) -
             masks[n] = cv2.dilate(m.astype(np.uint8), np.ones((9, 9), np.uint8))
         if (sdir / "depth" / n).is_file():
             depths[n] = read_depth_png(sdir / "depth" / n, cams.depth_scale)
+    best = None
+    for attempt in range(SFM_ATTEMPTS):
+        poses, info = _reconstruct(sdir, images, masks, depths, cams, seed + attempt)
+        info["sfm_attempts"] = attempt + 1
+        if best is None or info["median_rot_deg"] < best[1]["median_rot_deg"]:
+            best = poses, info
+        if info["median_rot_deg"] <= BROKEN_ROT_DEG:
+            break
+    return best
+
+
+SFM_ATTEMPTS = 3
+BROKEN_ROT_DEG = 45.0
+"""A reconstruction whose cameras, aligned by their centres, are still this far off is a wrong local
+minimum, not noise (measured once under load: all 24 views of a ring ~179 degrees off with a 0.84 px
+reprojection error, i.e. a depth-reversed solution); SfM is then re-run with the next seed, at most
+``SFM_ATTEMPTS`` times, and the best attempt kept."""
+
+
+def _reconstruct(sdir: Path, images: dict, masks: dict, depths: dict, cams, seed: int
+                 ) -> tuple[dict[str, np.ndarray], dict]:
+    """One SfM attempt (+ metric scale and RGB-D bundle adjustment with depths), aligned to ``cams``."""
+    K = cams.intrinsics
     sfm = run_sfm(images, K, masks if len(masks) == len(images) else None, seed=seed)
     info: dict = {"sfm_registered": len(sfm.c2w), "sfm_reprojection_px": sfm.mean_reprojection_error}
     if depths:
