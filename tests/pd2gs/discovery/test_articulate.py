@@ -115,13 +115,10 @@ def test_type_is_kept_when_choice_is_off():
     assert out[1].type == "revolute"
 
 
-@pytest.mark.parametrize("part_ref", [
-    False,
-    pytest.param(True, marks=pytest.mark.xfail(strict=True, reason=(
-        "known limit (docs/pd2gs-parts.md): with the lid's own reference state (m3) the relabelling recovers "
-        "10 of 13 and moves 3 base side Gaussians to the lid; with one reference state 11 of 13 and none"))),
-])
-def test_relabelling_returns_mislabelled_gaussians_to_their_part(part_ref):
+def test_relabelling_returns_mislabelled_gaussians_to_their_part():
+    """With one reference state for all parts. With the lid's own (m3, the default) the outcome sits on
+    the threshold: 10 or 11 of 13 returned and 0-3 base Gaussians moved, depending on the thread count
+    (docs/pd2gs-parts.md, Known limits)."""
     fld, labels, views, truth = _scene("revolute")
     rng = np.random.default_rng(0)
     # Gaussians on the front half of the lid's top face: the side faces are 1-2 px thin in these 64x48
@@ -130,7 +127,7 @@ def test_relabelling_returns_mislabelled_gaussians_to_their_part(part_ref):
     wrong = rng.choice(lid, len(lid) // 3, replace=False)
     given = labels.copy()
     given[wrong] = 0
-    s = FitSettings(iters=150, search_views=2, part_ref=part_ref)
+    s = FitSettings(iters=150, search_views=2, part_ref=False)
     out, new_labels, diag = fit_articulation(fld, given, {1: _wrong_start("revolute", truth)}, views, "m0", "m3",
                                              s, BG)
     back = float(np.mean(new_labels[wrong] == 1))
