@@ -49,7 +49,7 @@ SFM_ATTEMPTS = 3
 BROKEN_ROT_DEG = 45.0
 """A reconstruction whose cameras, aligned by their centres, are still this far off is a wrong local
 minimum, not noise (measured once under load: all 24 views of a ring ~179 degrees off with a 0.84 px
-reprojection error, i.e. a depth-reversed solution); SfM is then re-run with the next seed, at most
+reprojection error, likely a depth-reversed solution); SfM is then re-run with the next seed, at most
 ``SFM_ATTEMPTS`` times, and the best attempt kept."""
 
 
