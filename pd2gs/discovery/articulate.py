@@ -48,7 +48,7 @@ import torch
 from .consolidate import absorb_clusters, merge_touching
 from .field import StateField
 from .kinematics import EPS, JointEstimate
-from .posing import (PartJoint, Views, composite_ref, footprint_losses, held_out_loss, pose, project, render_posed,
+from .posing import (PartJoint, Views, footprint_losses, held_out_loss, pose, posed_parts, project, render_posed,
                      world_motions)
 
 
@@ -249,7 +249,7 @@ def _photo_errors(ref, state_means: np.ndarray, labels: np.ndarray, joints: list
     ``joints``), inf with fewer than ``photo_min_views`` views of evidence; -> (errors, column labels).
     Under a candidate, a Gaussian starts where the field puts it in that candidate's reference state
     (``state_means`` (K, N, 3); ``r`` for the static base), as it would after joining it; every captured
-    state is evidence (each candidate is trivially right in its own reference state, so all are alike)."""
+    state is evidence except the one where all candidates coincide (``r`` and every joint's reference)."""
     from pd2gs.render import rasterize
 
     f32 = lambda a: torch.as_tensor(np.ascontiguousarray(a), dtype=torch.float32)  # noqa: E731
@@ -427,7 +427,8 @@ def fit_articulation(fld: StateField, labels: np.ndarray, joints: dict[int, Join
     for k in range(len(views)):  # evenly spaced held-out views per state
         n = len(views[k])
         held += [(k, int(i)) for i in np.unique(np.linspace(0, n - 1, min(s.eval_views, n)).round().astype(int))]
-    train = [p for p in pairs if p not in set(held)] or pairs
+    held_set = set(held)
+    train = [p for p in pairs if p not in held_set] or pairs
     scale = float(np.linalg.norm(np.ptp(fld.means[r], axis=0))) or 1.0
     part_ref = (_reference_states(fld, labels, list(joints), views, s.ref_views, backend) if s.part_ref
                 else {p: r for p in joints})
@@ -435,8 +436,7 @@ def fit_articulation(fld: StateField, labels: np.ndarray, joints: dict[int, Join
 
     def posed(js: list[PartJoint]) -> tuple[dict, dict]:
         """(ref, groups) for the current labels and joints ``js``."""
-        return (composite_ref(stack, labels, js, r),
-                {j.label: torch.as_tensor(np.flatnonzero(labels == j.label), dtype=torch.long) for j in js})
+        return posed_parts(stack, labels, js, r)
 
     def points(p: int, k: int) -> np.ndarray:
         """Centres (n, 3) of part p in state k (its opaque Gaussians when it has 3 or more)."""

@@ -20,7 +20,7 @@ from typing import Callable
 import numpy as np
 import torch
 
-from .posing import PartJoint, Views, composite_ref, footprint_losses
+from .posing import PartJoint, Views, footprint_losses, posed_parts
 
 
 def absorb_clusters(stack: dict[str, torch.Tensor], r: int, labels: np.ndarray, joints: list[PartJoint],
@@ -45,8 +45,7 @@ def absorb_clusters(stack: dict[str, torch.Tensor], r: int, labels: np.ndarray, 
     diag: dict = {"pruned": [], "merged": [], "kept": {}}
 
     def config(lab: np.ndarray, js: list[PartJoint]):
-        groups = {j.label: torch.as_tensor(np.flatnonzero(lab == j.label), dtype=torch.long) for j in js}
-        return composite_ref(stack, lab, js, r), groups, js
+        return (*posed_parts(stack, lab, js, r), js)
     while joints:
         sizes = {j.label: int((labels == j.label).sum()) for j in joints}
         changed = False
@@ -81,9 +80,9 @@ def merge_touching(stack: dict[str, torch.Tensor], r: int, labels: np.ndarray, j
                    ) -> tuple[np.ndarray, list[PartJoint], list[dict]]:
     """Touching clusters of one joint type that one joint moves as well merge, the best pair first.
 
-    For every pair (a, b) with b in ``touching(labels, parts)[a]``, the larger cluster's joint is copied, re-fitted to the
-    union by ``refit(ref, groups, joints, joint)`` (in place; Adam in :mod:`.articulate`), and the union's
-    pixels (held-out views) are scored under the merged and the separate joints. The pair whose merged
+    For every pair (a, b) with b in ``touching(labels, parts)[a]``, the larger cluster's joint is copied,
+    re-fitted to the union by ``refit(ref, groups, joints, joint)`` (in place; Adam in :mod:`.articulate`),
+    and the union's pixels (held-out views) are scored under the merged and the separate joints. The pair whose merged
     error exceeds its separate error by the least, at most by ``margin`` (relative), merges; repeated
     until no pair passes. -> (labels (N,), joints, [{"into", "part", "separate", "merged"}]).
     """
@@ -92,12 +91,12 @@ def merge_touching(stack: dict[str, torch.Tensor], r: int, labels: np.ndarray, j
     done: list[dict] = []
 
     def config(lab: np.ndarray, js: list[PartJoint]):
-        groups = {j.label: torch.as_tensor(np.flatnonzero(lab == j.label), dtype=torch.long) for j in js}
-        return composite_ref(stack, lab, js, r), groups, js
+        return (*posed_parts(stack, lab, js, r), js)
     while True:
         sizes = {j.label: int((labels == j.label).sum()) for j in joints}
         near = touching(labels, [j.label for j in joints])
         best = None
+        separate = config(labels, joints)
         for a in joints:
             for b in joints:
                 if a.label >= b.label or b.label not in near.get(a.label, []) or a.type != b.type:
@@ -112,7 +111,7 @@ def merge_touching(stack: dict[str, torch.Tensor], r: int, labels: np.ndarray, j
                 merged = config(merged_labels, js)
                 refit(merged[0], merged[1], js, fit)
                 both = torch.as_tensor(np.flatnonzero(merged_labels == keep.label), dtype=torch.long)
-                sep, mer = footprint_losses([config(labels, joints), merged], both, views, held, bg, backend)
+                sep, mer = footprint_losses([separate, merged], both, views, held, bg, backend)
                 ratio = mer / max(sep, 1e-12)
                 if ratio <= 1.0 + margin and (best is None or ratio < best[0]):
                     best = (ratio, keep, drop, fit, sep, mer)

@@ -6,7 +6,8 @@ of its Gaussians); each part moves by its :class:`PartJoint` to state k (and by 
 chained joint); everything else stays put. Each part's Gaussians are taken from the part's own reference
 state (``PartJoint.ref``, where its joint values are 0): the state in which the part is seen best, since a
 trained field places Gaussians well only where some view of that state sees them (a drawer's inside is
-hidden while it is closed). :func:`composite_ref` assembles such a ``ref`` from a multi-state field. Metres and radians, world frame, OpenCV cameras. Shared by the
+hidden while it is closed). :func:`composite_ref` assembles such a ``ref`` from a multi-state field,
+:func:`posed_parts` it and its ``groups``. Metres and radians, world frame, OpenCV cameras. Shared by the
 articulation fit (:mod:`.articulate`) and part consolidation (:mod:`.consolidate`).
 """
 from __future__ import annotations
@@ -51,6 +52,15 @@ def composite_ref(stack: dict[str, torch.Tensor], labels: np.ndarray, joints: li
     k, i = torch.as_tensor(state, dtype=torch.long), torch.arange(len(labels))
     return {"means": stack["means"][k, i], "quats": stack["quats"][k, i], "scales": stack["scales"][k, i],
             "colors": stack["colors"], "opacities": stack["opacities"]}
+
+
+def posed_parts(stack: dict[str, torch.Tensor], labels: np.ndarray, joints: list["PartJoint"], r: int
+                ) -> tuple[dict[str, torch.Tensor], dict[int, torch.Tensor]]:
+    """(ref, groups) for the labels (N,) and ``joints``: :func:`composite_ref` and label -> indices of the
+    joint's Gaussians, the two inputs every posing function here takes."""
+    labels = np.asarray(labels)
+    return (composite_ref(stack, labels, joints, r),
+            {j.label: torch.as_tensor(np.flatnonzero(labels == j.label), dtype=torch.long) for j in joints})
 
 
 def joint_motion(j: PartJoint, k: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:

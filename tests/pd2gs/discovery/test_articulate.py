@@ -272,7 +272,8 @@ def _hidden_tray_scene(n_base: int = 2400, n_tray: int = 500):
     means = np.concatenate([base, tray])
     labels = np.r_[np.zeros(n_base, int), np.ones(n_tray, int)]
     stripes = 0.5 + 0.5 * np.sin(14 * means[:, 0:1] + 9 * means[:, 1:2])
-    colors = np.where(labels[:, None] == 0, np.array([0.8, 0.3, 0.2]), np.array([0.1, 0.5, 0.9])) * (0.5 + 0.5 * stripes)
+    tint = np.where(labels[:, None] == 0, np.array([0.8, 0.3, 0.2]), np.array([0.1, 0.5, 0.9]))
+    colors = tint * (0.5 + 0.5 * stripes)
     quats = np.tile([1.0, 0.0, 0.0, 0.0], (len(means), 1))
     scales = np.full((len(means), 3), 0.02)
     opac = np.full(len(means), 0.95)
