@@ -161,6 +161,13 @@ def main(argv: list[str] | None = None) -> int:
     except RsartError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
+    except ImportError as e:  # a module of a missing extra (e.g. [server]): one line, no traceback
+        from rsart.extras import from_import_error
+
+        if (err := from_import_error(e)) is None:
+            raise
+        print(f"error: {err}", file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
         return 130
 

@@ -229,9 +229,16 @@ def _run(args) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``pd2gs`` console script."""
+    args = _parser().parse_args(argv)  # --help stays fast: torch loads only for a command
+    from rsart.extras import MissingExtra, require
+
+    try:
+        require("pd2gs", f"pd2gs {args.cmd}")
+    except MissingExtra as e:
+        print(f"pd2gs: error: {e}", file=sys.stderr)
+        return 2
     from pd2gs.data import DataError
 
-    args = _parser().parse_args(argv)
     try:
         return {"train": _train, "render": _render, "eval": _eval, "run": _run}[args.cmd](args)
     except (UsageError, DataError) as e:

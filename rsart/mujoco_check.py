@@ -11,12 +11,13 @@ from pathlib import Path
 import numpy as np
 
 from .errors import RsartError
+from .extras import imported
 from .kinematics import Twin
 
 
 def load_mujoco(urdf_path: str | os.PathLike):
     """Load a URDF into a ``mujoco.MjModel``; raise RsartError naming the file on failure."""
-    import mujoco
+    mujoco = imported("mujoco", what="MuJoCo checks")
 
     try:
         return mujoco.MjModel.from_xml_path(str(urdf_path))
@@ -26,7 +27,7 @@ def load_mujoco(urdf_path: str | os.PathLike):
 
 def mujoco_pose_error(twin: Twin, urdf_path: str | os.PathLike, values: dict[str, float]) -> float:
     """Max distance (m) between rsart's and MuJoCo's part positions of each part's mesh bounding-box corners at ``values``."""
-    import mujoco
+    mujoco = imported("mujoco", what="MuJoCo checks")
 
     model = load_mujoco(urdf_path)
     data = mujoco.MjData(model)

@@ -2,7 +2,11 @@
 from __future__ import annotations
 
 import numpy as np
-import torch
+
+from .extras import require
+
+require("torch", "rsart's torch datasets")  # one line naming `pip install 'rsart[torch]'`, not an ImportError
+import torch  # noqa: E402
 from torch.utils.data import Dataset as _TorchDataset
 
 

@@ -84,11 +84,11 @@ def write_object(twin: Twin, out_dir: str | os.PathLike, *, object_id: str, cate
         write_urdf(twin, tmp / URDF_PATH, visual_files, mesh_dir="visual")
         twin_files = {"urdf": URDF_PATH}
         if write_usd:
-            try:
+            from .extras import has
+
+            if has("usd"):  # without the [usd] extra the URDF alone describes the twin (docs/procedural.md)
                 from . import usd
-            except ImportError:  # usd-core missing: the URDF alone still describes the twin
-                usd = None
-            if usd is not None and hasattr(usd, "write_usd"):
+
                 usd.write_usd(twin, tmp / USD_PATH, units=units)
                 twin_files["usd"] = USD_PATH
         meta = ObjectMeta(object_id=object_id, category=category, source=dict(source), units=units,

@@ -22,6 +22,7 @@ COMMANDS = [
     "rsart.cli.validate_submission",  # validate-submission
     "rsart.cli.adapters",     # adapters, export, import (method plug-ins, entry points rsart.adapters)
     "rsart.cli.perturb",      # perturb (camera-pose noise / COLMAP poses)
+    "rsart.cli.doctor",       # doctor (what this install can do)
 ]
 
 DESCRIPTION = """\
@@ -73,6 +74,14 @@ def run(func, args) -> int:
         return int(func(args) or 0)
     except RsartError as e:
         print(f"error: {e}", file=sys.stderr)
+        return 2
+    except ImportError as e:  # a module of a missing extra: one line naming `pip install 'rsart[X]'`
+        from ..extras import from_import_error
+
+        err = from_import_error(e)
+        if err is None:
+            raise
+        print(f"error: {err}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)

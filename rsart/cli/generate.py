@@ -8,9 +8,9 @@ from pathlib import Path
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from ..sources.procedural.registry import CATEGORIES
+    from ..sources.procedural.catalogue import CATALOGUE  # data only: --help must not import trimesh
 
-    cats = "\n".join(f"  {c.id:<14} {c.family:<13} {c.description}" for c in CATEGORIES.values())
+    cats = "\n".join(f"  {c.id:<14} {c.family:<13} {c.description}" for c in CATALOGUE)
     p = sub.add_parser(
         "generate", help="generate procedural twins (one object, or the rsart-synth suite)",
         formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -22,7 +22,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "twin/visual/*.obj. Metres and radians; world = object base frame, z up, base on z = 0,\n"
                     "front facing -y. Same seed -> byte-identical files.\n\ncategories:\n" + cats)
     what = p.add_mutually_exclusive_group(required=True)
-    what.add_argument("--category", choices=sorted(CATEGORIES), metavar="CATEGORY", help="one category (see below)")
+    what.add_argument("--category", choices=sorted(c.id for c in CATALOGUE), metavar="CATEGORY", help="one category (see below)")
     what.add_argument("--suite", choices=["rsart-synth"], help="the named benchmark suite")
     p.add_argument("--seed", type=int, default=0, help="instance seed (default 0)")
     p.add_argument("--count", type=int, default=1, help="generate seeds SEED..SEED+COUNT-1 (default 1)")

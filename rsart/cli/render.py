@@ -126,6 +126,11 @@ def _suite_dirs(name: str, out: Path, overwrite: bool, workers: int) -> list[Pat
 
 def _render(args) -> int:
     from ..errors import RsartError
+    from ..extras import require
+
+    require("render", "rsart render", modules=("open3d",))  # depth/masks ray-cast; pyrender optional (RGB)
+    if args.backend == "ray":
+        require("ray", "rsart render --backend ray")
     from ..render.inputs import object_dirs
     from ..render.raster import resolve_backend
     from ..render.runner import default_workers, finish_root, render_object_dir

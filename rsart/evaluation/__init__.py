@@ -7,11 +7,27 @@
 
 Contract: DESIGN.md §6.2 (submission) and §6.3 (metrics); docs/evaluation.md.
 """
-from .ground_truth import GroundTruth, load_ground_truth, resolve_states
-from .gt_submission import Perturbation, make_gt_submission, parse_perturbation
-from .score import EvalConfig, score_object, score_submission
-from .submission import Limits, Submission, load_mesh, read_submission
+from __future__ import annotations
 
-__all__ = ["GroundTruth", "load_ground_truth", "resolve_states", "Perturbation", "make_gt_submission",
-           "parse_perturbation", "EvalConfig", "score_object", "score_submission", "Limits", "Submission",
-           "load_mesh", "read_submission"]
+import importlib
+
+#: public name -> submodule; imported on first use so ``rsart-eval --help`` stays fast (no trimesh/scipy).
+_EXPORTS = {
+    "GroundTruth": "ground_truth", "load_ground_truth": "ground_truth", "resolve_states": "ground_truth",
+    "Perturbation": "gt_submission", "make_gt_submission": "gt_submission", "parse_perturbation": "gt_submission",
+    "EvalConfig": "score", "score_object": "score", "score_submission": "score",
+    "Limits": "submission", "Submission": "submission", "load_mesh": "submission", "read_submission": "submission",
+}
+__all__ = list(_EXPORTS)
+
+
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        value = getattr(importlib.import_module(f".{_EXPORTS[name]}", __name__), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

@@ -15,7 +15,6 @@ import sys
 from pathlib import Path
 
 from ..errors import Problem, RsartError
-from ..metrics.chamfer import ChamferConfig
 
 DESCRIPTION = """\
 Score an articulated-object reconstruction submission (rsart-submission/1, DESIGN §6.2) against the
@@ -153,6 +152,7 @@ def _toolkit_version() -> str:
 
 def _score(args) -> int:
     from ..io import sha256_file
+    from ..metrics.chamfer import ChamferConfig
     from .report import build_scores, write_reports
     from .score import EvalConfig, score_submission
     from .submission import Limits
@@ -231,6 +231,13 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
+    except ImportError as e:  # a module of a missing extra: one line naming `pip install 'rsart[X]'`
+        from ..extras import from_import_error
+
+        if (err := from_import_error(e)) is None:
+            raise
+        print(f"error: {err}", file=sys.stderr)
+        return 2
     except Exception as e:  # an internal bug: one line unless RSART_DEBUG asks for the traceback
         if os.environ.get("RSART_DEBUG"):
             raise

@@ -11,9 +11,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
-import trimesh
+
+# cv2 and trimesh are imported inside the functions: `rsart render --help` reads BACKGROUNDS from here.
 
 #: Background kinds understood by the renderer.
 BACKGROUNDS = ("booth", "plain", "transparent", "random")
@@ -41,6 +41,8 @@ def booth_meshes(object_bounds: np.ndarray, camera_radius: float, spec: BoothSpe
     object's bottom and the pedestal from being coincident surfaces);
     the curtain radius is at least 1.6x the camera radius so every camera stays inside it.
     """
+    import trimesh
+
     lo, hi = np.asarray(object_bounds, dtype=np.float64)
     cx, cy = (lo[:2] + hi[:2]) / 2
     foot = float(np.max(hi[:2] - lo[:2]))
@@ -72,6 +74,8 @@ def booth_meshes(object_bounds: np.ndarray, camera_radius: float, spec: BoothSpe
 
 def random_background(height: int, width: int, rng: np.random.Generator) -> np.ndarray:
     """(H, W, 3) uint8 random background: a smooth random colour field with random stripes and grain."""
+    import cv2
+
     gh, gw = rng.integers(2, 9, size=2)
     grid = rng.uniform(0, 255, size=(gh, gw, 3)).astype(np.float32)
     img = cv2.resize(grid, (width, height), interpolation=cv2.INTER_CUBIC)

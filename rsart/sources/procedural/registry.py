@@ -16,6 +16,7 @@ from ...kinematics import Twin
 from . import partnet_like as P
 from . import rs_art_like as R
 from .builder import ObjectBuilder
+from .catalogue import CATALOGUE
 
 GENERATOR = "rsart.sources.procedural"
 VERSION = "1"
@@ -32,25 +33,24 @@ class Category:
     description: str
 
 
-CATEGORIES: dict[str, Category] = {c.id: c for c in [
-    Category("drawer", "rs-art-like", R.make_drawer, (1, 3), "desktop drawer unit, 1-3 prismatic drawers"),
-    Category("desk_lamp", "rs-art-like", R.make_desk_lamp, (2, 3), "architect desk lamp, 2-3 chained revolute links"),
-    Category("eyeglasses_rs", "rs-art-like", lambda b, r, n: R.make_eyeglasses(b, r, n, "rs"), (2, 2),
-             "eyeglasses, 2 revolute temples"),
-    Category("floppy_drive", "rs-art-like", R.make_floppy_drive, (2, 2), "floppy-disk drive: prismatic tray + revolute flap"),
-    Category("woven_basket", "rs-art-like", R.make_woven_basket, (1, 2), "woven basket, 1-2 revolute lids or a handle"),
-    Category("stand", "rs-art-like", R.make_stand, (2, 2), "folding phone/laptop stand, 2 chained revolute hinges"),
-    Category("box", "partnet-like", P.make_box, (1, 3), "storage box with hinged lid flaps"),
-    Category("door", "partnet-like", P.make_door, (2, 2), "door leaf + lever handle in a frame"),
-    Category("eyeglasses", "partnet-like", lambda b, r, n: R.make_eyeglasses(b, r, n, "partnet"), (2, 2),
-             "eyeglasses, 2 revolute temples"),
-    Category("faucet", "partnet-like", P.make_faucet, (2, 3), "faucet: revolute handles (+ swivel spout)"),
-    Category("oven", "partnet-like", P.make_oven, (2, 3), "oven: drop-down door + rotary knobs"),
-    Category("refrigerator", "partnet-like", P.make_refrigerator, (2, 2),
-             "refrigerator, 2 doors (side by side or co-axial)"),
-    Category("storage", "partnet-like", P.make_storage, (2, 5), "storage furniture: doors + drawers"),
-    Category("table", "partnet-like", P.make_table, (2, 5), "desk/table with drawers and doors"),
-]}
+_MAKERS: dict[str, Callable[[ObjectBuilder, np.random.Generator, int | None], None]] = {
+    "drawer": R.make_drawer,
+    "desk_lamp": R.make_desk_lamp,
+    "eyeglasses_rs": lambda b, r, n: R.make_eyeglasses(b, r, n, "rs"),
+    "floppy_drive": R.make_floppy_drive,
+    "woven_basket": R.make_woven_basket,
+    "stand": R.make_stand,
+    "box": P.make_box,
+    "door": P.make_door,
+    "eyeglasses": lambda b, r, n: R.make_eyeglasses(b, r, n, "partnet"),
+    "faucet": P.make_faucet,
+    "oven": P.make_oven,
+    "refrigerator": P.make_refrigerator,
+    "storage": P.make_storage,
+    "table": P.make_table,
+}
+CATEGORIES: dict[str, Category] = {c.id: Category(c.id, c.family, _MAKERS[c.id], c.movable, c.description)
+                                   for c in CATALOGUE}
 
 RS_ART_LIKE = [c for c, v in CATEGORIES.items() if v.family == "rs-art-like"]
 PARTNET_LIKE = [c for c, v in CATEGORIES.items() if v.family == "partnet-like"]
