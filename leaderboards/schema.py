@@ -35,6 +35,8 @@ submissions = Table(
     Column("method_json", Text, nullable=False),
     Column("toolkit_name", String(100), nullable=False),
     Column("toolkit_version", String(100), nullable=False),
+    # scores.json toolkit.scorer_version ("0" = scored before versions were recorded); never ranked across
+    Column("scorer_version", String(20), nullable=False, server_default="0"),
     Column("config_hash", String(64), nullable=False),
     Column("config_json", Text, nullable=False),
     Column("dataset_name", String(200), nullable=False),
@@ -150,4 +152,14 @@ def open_engine(url: str, create: bool = True) -> Engine:
         engine = create_engine(url, pool_pre_ping=True)
     if create:
         metadata.create_all(engine)
+        _add_scorer_version(engine)
     return engine
+
+
+def _add_scorer_version(engine: Engine) -> None:
+    """Stores made before scorer versions were recorded get the column (their rows read as version "0")."""
+    from sqlalchemy import inspect, text
+
+    if "scorer_version" not in {c["name"] for c in inspect(engine).get_columns("submissions")}:
+        with engine.begin() as conn:
+            conn.execute(text("ALTER TABLE submissions ADD COLUMN scorer_version VARCHAR(20) NOT NULL DEFAULT '0'"))

@@ -53,10 +53,14 @@ class SubmissionRow:
     source: str
     created_at: float
     agg: dict[str, dict[str, tuple[float | None, int, int]]] = field(default_factory=dict)
+    scorer_version: str = "0"
 
     @property
     def dataset_label(self) -> str:
-        return f"{self.dataset_name} v{self.dataset_version}" + (f" ({self.split})" if self.split else "")
+        """Dataset, split and scorer version: the site ranks rows only within one label, so rows scored by
+        different scorer versions are never ranked together."""
+        return (f"{self.dataset_name} v{self.dataset_version}" + (f" ({self.split})" if self.split else "")
+                + f" · scorer {self.scorer_version}")
 
 
 def _need(doc: dict, path: Path, *keys: str) -> Any:
@@ -93,6 +97,8 @@ def submission_key(doc: dict) -> str:
     ident = {"submission": doc["submission"]["sha256"], "config": doc["config_hash"],
              "dataset": [ds.get("name"), str(ds.get("version", "")), ds.get("split") or ""],
              "toolkit": [doc["toolkit"].get("name", "rsart"), doc["toolkit"]["version"]]}
+    if "scorer_version" in doc["toolkit"]:  # absent in older scores.json: their keys stay as they were
+        ident["scorer"] = str(doc["toolkit"]["scorer_version"])
     return hashlib.sha256(json.dumps(ident, sort_keys=True).encode()).hexdigest()
 
 
@@ -173,6 +179,7 @@ def add_scores(engine: Engine, path: str | Path, *, source: str = "cli", team: s
                 key=key, method_id=mid, method_name=str(method["name"]), method_version=str(method.get("version", "")),
                 method_json=json.dumps(method, sort_keys=True), toolkit_name=str(doc["toolkit"].get("name", "rsart")),
                 toolkit_version=str(doc["toolkit"]["version"]), config_hash=str(doc["config_hash"]),
+                scorer_version=str(doc["toolkit"].get("scorer_version", "0")),
                 config_json=json.dumps(doc.get("config", {}), sort_keys=True), dataset_name=str(ds["name"]),
                 dataset_version=str(ds.get("version", "")), split=str(ds.get("split") or ""),
                 submission_sha256=str(doc["submission"]["sha256"]), track_camera_poses=track.camera_poses,
@@ -211,7 +218,7 @@ def list_submissions(engine: Engine) -> list[SubmissionRow]:
             split=s["split"], track={"camera_poses": s["track_camera_poses"], "states": s["track_states"],
                                      "part_count": s["track_part_count"], "inputs": s["track_inputs"]},
             n_objects=s["n_objects"], n_failed_objects=s["n_failed_objects"], source=s["source"],
-            created_at=s["created_at"], agg=by.get(s["id"], {})))
+            created_at=s["created_at"], agg=by.get(s["id"], {}), scorer_version=s["scorer_version"]))
     return out
 
 

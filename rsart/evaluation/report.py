@@ -242,6 +242,9 @@ def write_reports(scores: dict, out: str | Path) -> list[Path]:
 def build_scores(results: dict[str, dict], *, config: dict, config_hash: str, toolkit_version: str,
                  dataset: dict[str, Any], submission: dict[str, Any]) -> dict:
     """The scores.json document."""
-    return {"format": "rsart-scores/1", "toolkit": {"name": "rsart", "version": toolkit_version},
+    from .version import SCORER_VERSION
+
+    return {"format": "rsart-scores/1",
+            "toolkit": {"name": "rsart", "version": toolkit_version, "scorer_version": SCORER_VERSION},
             "dataset": dataset, "submission": submission, "config": config, "config_hash": config_hash,
             "aggregate": aggregate(results), "failures": failure_list(results), "objects": results}
