@@ -15,7 +15,7 @@ export MUJOCO_GL ?= $(PYOPENGL_PLATFORM)
 DEMO_OUT ?= demo_out
 PYTEST_ARGS ?=
 
-.PHONY: setup sysdeps testdeps aptinstall demo test bench clean
+.PHONY: setup sysdeps testdeps aptinstall demo test test-core bench clean
 
 setup: sysdeps $(STAMP)
 
@@ -30,6 +30,7 @@ aptinstall:
 	if [ -n "$$missing" ]; then echo "installing system libraries:$$missing"; \
 	  $(SUDO) apt-get update -q && DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -q $$missing; fi
 
+# The full environment, = pip install 'rsart[all]' pinned by requirements.lock (every extra).
 $(STAMP): pyproject.toml requirements.lock
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --disable-pip-version-check -r requirements.lock
@@ -41,6 +42,10 @@ demo: setup
 
 test: setup testdeps
 	$(PY) -m pytest -q $(PYTEST_ARGS)
+
+# The core install alone (pip install rsart, no extras) in a fresh temporary venv, then the `core` tests.
+test-core:
+	PYTHON=$(PYTHON) .ci/core
 
 bench: setup
 	for b in benchmarks/*.py; do echo "== $$b"; $(PY) $$b || exit 1; done

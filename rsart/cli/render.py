@@ -128,9 +128,9 @@ def _render(args) -> int:
     from ..errors import RsartError
     from ..extras import require
 
-    require("render", "rsart render", modules=("open3d",))  # depth/masks ray-cast; pyrender optional (RGB)
     if args.backend == "ray":
         require("ray", "rsart render --backend ray")
+    require("render", "rsart render", modules=("open3d",))  # depth/masks ray-cast; pyrender optional (RGB)
     from ..render.inputs import object_dirs
     from ..render.raster import resolve_backend
     from ..render.runner import default_workers, finish_root, render_object_dir

@@ -8,6 +8,8 @@ from rsart.io import (atomic_dir, read_depth_png, read_mask_png, read_png_rgb, r
                       write_mask_png, write_png_rgb)
 from rsart.verify import verify, write_checksums
 
+pytestmark = pytest.mark.core  # runs on the core install alone (.ci/core)
+
 
 def test_project_and_rays_agree():
     cam = Camera(Intrinsics(40, 30, 35.0, 36.0, 19.5, 14.5), look_at(np.array([0.3, -1.0, 0.6]), np.zeros(3)))

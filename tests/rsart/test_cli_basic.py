@@ -3,7 +3,11 @@ import json
 import subprocess
 import sys
 
+import pytest
+
 from rsart.verify import write_checksums
+
+pytestmark = pytest.mark.core  # runs on the core install alone (.ci/core)
 
 
 def rsart(*args):

@@ -9,6 +9,8 @@ from rsart.camera import Intrinsics, look_at
 from rsart.format import CamerasFile, DatasetIndex, ViewRecord, write_cameras, write_index
 from rsart.io import write_depth_png, write_mask_png, write_png_rgb
 
+pytestmark = pytest.mark.core  # runs on the core install alone (.ci/core)
+
 
 def add_views(obj_dir, state="m0", n=4, w=32, h=24):
     """Write n small synthetic views (real PNG files) for a state."""

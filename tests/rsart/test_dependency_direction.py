@@ -3,7 +3,11 @@ capture_tools or leaderboards (they plug into the CLI through entry points only)
 import ast
 from pathlib import Path
 
+import pytest
+
 import rsart
+
+pytestmark = pytest.mark.core  # runs on the core install alone (.ci/core)
 
 FORBIDDEN = {"pd2gs", "baselines_adapters", "capture_tools", "leaderboards"}
 

@@ -10,6 +10,8 @@ from rsart.format import (CamerasFile, ViewRecord, parse_cameras, parse_index, p
                           meta_to_dict, write_cameras, read_cameras)
 from rsart.camera import Intrinsics
 
+pytestmark = pytest.mark.core  # runs on the core install alone (.ci/core)
+
 META = {
     "format": "rsart/1", "object_id": "storage-0003", "category": "storage",
     "source": {"kind": "procedural", "id": "storage:3"}, "units": "m",

@@ -9,6 +9,8 @@ from rsart.format import Joint
 from rsart.kinematics import Twin, TwinPart, joint_motion, rotation_matrix
 from tests.conftest import box, make_cabinet, make_lamp
 
+pytestmark = pytest.mark.core  # runs on the core install alone (.ci/core)
+
 
 def apply(T, p):
     return T[:3, :3] @ np.asarray(p, float) + T[:3, 3]

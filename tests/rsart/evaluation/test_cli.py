@@ -9,6 +9,9 @@ import sys
 from pathlib import Path
 
 import pandas as pd
+import pytest
+
+pytestmark = pytest.mark.core  # runs on the core install alone (.ci/core)
 
 REPO = Path(__file__).resolve().parents[3]
 

@@ -8,6 +8,8 @@ import pytest
 
 from rsart.evaluation.cli import main
 
+pytestmark = pytest.mark.core  # runs on the core install alone (.ci/core)
+
 LID = ("results", "cabinet-0000", "parts", "lid")
 
 

@@ -6,6 +6,8 @@ import trimesh
 from rsart.metrics.chamfer import (ChamferConfig, chamfer_distance, chamfer_floor, chamfer_mesh,
                                    filter_small_components, stable_seed)
 
+pytestmark = pytest.mark.core  # runs on the core install alone (.ci/core)
+
 
 def cube(shift=(0.0, 0.0, 0.0)):
     m = trimesh.creation.box((1.0, 1.0, 1.0))

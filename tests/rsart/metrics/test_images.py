@@ -4,6 +4,8 @@ import pytest
 
 from rsart.metrics.images import PSNR_MAX, mask_scores, psnr, ssim
 
+pytestmark = pytest.mark.core  # runs on the core install alone (.ci/core)
+
 
 def test_psnr_constant_offset():
     a = np.full((8, 8, 3), 0.5)

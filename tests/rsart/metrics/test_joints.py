@@ -8,6 +8,8 @@ from rsart.kinematics import rotation_matrix
 from rsart.metrics.joints import (JointEstimate, axis_angle_deg, axis_position, joint_errors, line_distance,
                                   part_motion, rotation_geodesic_deg)
 
+pytestmark = pytest.mark.core  # runs on the core install alone (.ci/core)
+
 
 def tilted(axis, deg, about):
     return rotation_matrix(np.asarray(about, float), math.radians(deg)) @ np.asarray(axis, float)

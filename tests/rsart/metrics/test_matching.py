@@ -2,9 +2,12 @@
 import math
 
 import numpy as np
+import pytest
 
 from rsart.metrics.joints import JointEstimate
 from rsart.metrics.matching import TYPE_PENALTY, match_parts
+
+pytestmark = pytest.mark.core  # runs on the core install alone (.ci/core)
 
 
 def joints():

@@ -9,6 +9,8 @@ from rsart.sources.procedural.checks import check_states, clearance_report, cont
 from rsart.sources.procedural.registry import default_movable
 from rsart.states import protocol_states
 
+pytestmark = pytest.mark.core  # runs on the core install alone (.ci/core)
+
 SEEDS = (0, 1, 2, 7)
 CASES = [(c, s, None) for c in CATEGORIES for s in SEEDS] + [
     ("storage", 0, 5), ("storage", 1, 5), ("table", 0, 5), ("table", 1, 5),
