@@ -5,7 +5,7 @@ and ``rsart-eval``. Everything heavy is an extra (``pip install 'rsart[render]'`
 one place that knows the map from importable module to extra, so every command says the same thing:
 
     >>> require("render", "rsart render")        # raises MissingExtra when pyrender/open3d are absent
-    >>> cv = imported("pxr.Usd", "usd")          # import a module of an extra, or raise MissingExtra
+    >>> Usd = imported("pxr.Usd", "usd")         # import a module of an extra, or raise MissingExtra
 
 Each CLI also turns a stray ``ModuleNotFoundError`` for a module of an extra into the same one line
 (:func:`from_import_error`), so no command ever ends in an ImportError traceback.
