@@ -15,7 +15,9 @@ referenced from ``twin/visual/`` (MuJoCo looks meshes up by file name in one ``m
 """
 from __future__ import annotations
 
+import contextlib
 import io
+import logging
 import math
 import os
 import re
@@ -27,7 +29,7 @@ import trimesh
 
 from .errors import Problems, RsartError
 from .format import Joint
-from .io import atomic_write_text
+from .io import atomic_write_text, resolve_inside
 from .kinematics import Twin, TwinPart
 
 MAX_URDF_BYTES = 20 * 1024 * 1024
@@ -49,6 +51,29 @@ def check_xml(data: bytes, source: str) -> None:
                          "URDF files need neither") from None
     except Exception as e:  # ParseError and friends
         raise RsartError(f"{source}: not well-formed XML ({e})") from None
+    # yourdfpy parses with lxml, which refuses what ElementTree accepts beyond its limits (nesting deeper
+    # than 256 levels, huge text nodes); yourdfpy then logs the error and re-parses in "recover" mode,
+    # silently dropping elements. Refuse such files here, with lxml's reason, instead.
+    from lxml import etree
+
+    try:
+        etree.fromstring(data, etree.XMLParser(resolve_entities=False, no_network=True, remove_blank_text=True))
+    except etree.XMLSyntaxError as e:
+        raise RsartError(f"{source}: XML the URDF parser refuses ({e})") from None
+
+
+@contextlib.contextmanager
+def _quiet_library_logs():
+    """Silence yourdfpy's (and lxml's) log records while parsing: rsart reports problems as one error."""
+    loggers = [logging.getLogger(n) for n in ("yourdfpy", "lxml", "trimesh")]
+    levels = [lg.level for lg in loggers]
+    for lg in loggers:
+        lg.setLevel(logging.CRITICAL + 1)
+    try:
+        yield
+    finally:
+        for lg, lv in zip(loggers, levels):
+            lg.setLevel(lv)
 
 def load_mesh_file(path: Path, scale: np.ndarray | None = None) -> list[trimesh.Trimesh]:
     """Load a mesh file (OBJ/PLY/STL/GLB/DAE) as a list of trimeshes, textures kept where present."""
@@ -63,6 +88,8 @@ def load_mesh_file(path: Path, scale: np.ndarray | None = None) -> list[trimesh.
         meshes = [loaded]
     else:
         raise RsartError(f"{path}: contains no triangle mesh")
+    if not any(len(m.faces) for m in meshes):  # e.g. a text file named .obj: trimesh reads it as empty
+        raise RsartError(f"{path}: contains no triangles (not a mesh, or an empty one)")
     if scale is not None:
         S = np.diag([*np.asarray(scale, dtype=float), 1.0])
         for m in meshes:
@@ -86,13 +113,16 @@ def _geometry_meshes(geom, base_dir: Path, source: str, where: str) -> list[trim
             fn = fn[len("file://"):]
         if os.path.isabs(fn):
             raise RsartError(f"{source}: {where}: absolute mesh path {fn!r} refused (meshes must lie inside {base_dir})")
-        p = (base_dir / fn).resolve()
-        root = base_dir.resolve()
-        if root not in p.parents:
-            raise RsartError(f"{source}: {where}: mesh path {fn!r} leaves the URDF folder")
+        try:
+            p = resolve_inside(base_dir, fn)
+        except RsartError:
+            raise RsartError(f"{source}: {where}: mesh path {fn!r} leaves the URDF folder") from None
         if not p.is_file():
             raise RsartError(f"{source}: {where}: mesh file {fn!r} not found")
-        return load_mesh_file(p, geom.mesh.scale if geom.mesh.scale is not None else None)
+        try:  # an unreadable or empty visual mesh is an error naming the link, never a silently empty part
+            return load_mesh_file(p, geom.mesh.scale if geom.mesh.scale is not None else None)
+        except RsartError as e:
+            raise RsartError(f"{source}: {where}: {e}") from None
     return []
 
 def read_urdf(path: str | os.PathLike, *, use: str = "visual", load_meshes: bool = True) -> Twin:
@@ -114,8 +144,9 @@ def read_urdf(path: str | os.PathLike, *, use: str = "visual", load_meshes: bool
     data = path.read_bytes()
     check_xml(data, source)
     try:
-        urdf = yourdfpy.URDF.load(io.BytesIO(data), load_meshes=False, build_scene_graph=False,
-                                  build_collision_scene_graph=False, load_collision_meshes=False)
+        with _quiet_library_logs():
+            urdf = yourdfpy.URDF.load(io.BytesIO(data), load_meshes=False, build_scene_graph=False,
+                                      build_collision_scene_graph=False, load_collision_meshes=False)
     except Exception as e:
         raise RsartError(f"{source}: not a valid URDF ({type(e).__name__}: {e})") from None
     robot = urdf.robot

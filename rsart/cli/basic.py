@@ -30,11 +30,16 @@ def register(sub: argparse._SubParsersAction) -> None:
 def _validate(args) -> int:
     from ..format import validate_path
 
+    from ..errors import escape_controls
+
     problems = validate_path(args.path)
+    if len(problems) == 1:  # one problem: one line (each line already names its file)
+        print(f"error: {escape_controls(problems[0])}", file=sys.stderr)
+        return 2
     if problems:
-        print(f"{args.path}: {len(problems)} problem{'s' if len(problems) != 1 else ''}", file=sys.stderr)
+        print(f"error: {escape_controls(str(args.path))}: {len(problems)} problems", file=sys.stderr)
         for p in problems:
-            print(f"  {p}", file=sys.stderr)
+            print(f"  - {escape_controls(p)}", file=sys.stderr)
         return 2
     print(f"{args.path}: valid")
     return 0

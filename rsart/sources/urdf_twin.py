@@ -137,7 +137,8 @@ def fold_helper_parts(twin: Twin, source: str | None = None) -> tuple[Twin, list
 
 
 def check_geometry(twin: Twin, source: str) -> None:
-    """Every part needs geometry (metrics sample it); raise RsartError naming the empty ones."""
+    """Every part needs geometry (metrics sample it) and an object needs a movable part (its states move
+    one); raise RsartError naming the empty parts or saying that nothing moves."""
     empty = [p.name for p in twin.parts if _is_empty(p.mesh)]
     if empty:
         raise RsartError(f"{source}: parts without any geometry: {empty} (every part needs a mesh to be evaluated)")
@@ -146,6 +147,9 @@ def check_geometry(twin: Twin, source: str) -> None:
             raise RsartError(f"{source}: part {p.name!r}: mesh has non-finite vertex coordinates")
         if not p.mesh.area > 0:
             raise RsartError(f"{source}: part {p.name!r}: mesh has no surface (zero area)")
+    if not twin.joints:
+        raise RsartError(f"{source}: no movable part with geometry (an RS-Art object needs at least one "
+                         "revolute or prismatic joint whose child has a mesh)")
 
 
 def scale_twin(twin: Twin, s: float) -> Twin:
