@@ -9,6 +9,12 @@ Everything is lazy and cached: loading reads only ``meta.json``; a state's ``cam
 read on first access to its views, and an image is decoded on first access to ``.rgb`` /
 ``.depth`` / ``.mask``. Shapes/units: rgb (H, W, 3) uint8; depth (H, W) float32 metres
 (0 = no measurement); mask (H, W) uint8 part index + 1 (0 = background); camera c2w OpenCV.
+
+Untrusted folders: every file read (index.json, meta.json, cameras.json, images) must stay inside the
+root the user opened (the dataset root, or the object folder given to ``load``) after following
+symlinks; one that leads out is refused by :func:`rsart.io.check_inside` before it is opened. Symlinks
+that stay inside the root are allowed. Every decoded image must be its camera's width x height; the
+error names the file.
 """
 from __future__ import annotations
 
@@ -24,7 +30,7 @@ import numpy as np
 from .camera import Camera
 from .errors import RsartError
 from .format import CamerasFile, DatasetIndex, ObjectMeta, State, read_cameras, read_index, read_meta
-from .io import read_depth_png, read_mask_png, read_png_rgb, write_json
+from .io import check_inside, read_depth_png, read_mask_png, read_png_rgb, write_json
 
 
 @dataclass
@@ -37,25 +43,37 @@ class View:
     state_dir: Path
     depth_scale: float = 0.001
     extra: dict[str, Any] = field(default_factory=dict)
+    root: Path | None = None  # files must stay inside it (default: the object folder, two levels up)
 
     def path(self, kind: str) -> Path:
         """Path of this view's ``kind`` image ("rgb" | "depth" | "mask")."""
         return self.state_dir / kind / f"{self.id}.png"
 
+    def _decode(self, kind: str, reader) -> np.ndarray:
+        """Decode ``kind`` after the inside-the-root check; refuse an image not of its camera's size."""
+        path = check_inside(self.root or self.state_dir.parent.parent, self.path(kind))
+        img = reader(path)
+        h, w = img.shape[:2]
+        cw, ch = self.camera.width, self.camera.height
+        if (w, h) != (cw, ch):
+            raise RsartError(f"{path}: {kind} image is {w}x{h} pixels but its camera (cameras.json, view "
+                             f"{self.id!r}) is {cw}x{ch}")
+        return img
+
     @cached_property
     def rgb(self) -> np.ndarray:
         """(H, W, 3) uint8 RGB."""
-        return read_png_rgb(self.path("rgb"))
+        return self._decode("rgb", read_png_rgb)
 
     @cached_property
     def depth(self) -> np.ndarray:
         """(H, W) float32 z-depth in metres, 0 = no measurement."""
-        return read_depth_png(self.path("depth"), self.depth_scale)
+        return self._decode("depth", lambda p: read_depth_png(p, self.depth_scale))
 
     @cached_property
     def mask(self) -> np.ndarray:
         """(H, W) uint8 part index + 1, 0 = background."""
-        return read_mask_png(self.path("mask"))
+        return self._decode("mask", read_mask_png)
 
     @property
     def has_depth(self) -> bool:
@@ -72,9 +90,10 @@ class View:
 class StateCapture:
     """An interaction state: its joint ``values`` and (if rendered/captured) its ``views``."""
 
-    def __init__(self, state: State, state_dir: Path):
+    def __init__(self, state: State, state_dir: Path, root: Path | None = None):
         self.state = state
         self.dir = state_dir
+        self.root = root or state_dir.parent.parent  # nothing outside it is read
 
     id = property(lambda self: self.state.id)
     kind = property(lambda self: self.state.kind)
@@ -88,7 +107,7 @@ class StateCapture:
     def cameras(self) -> CamerasFile:
         if not self.captured:
             raise RsartError(f"{self.dir}: state {self.id!r} has no captured views (no cameras.json)")
-        return read_cameras(self.dir / "cameras.json")
+        return read_cameras(check_inside(self.root, self.dir / "cameras.json"))
 
     @cached_property
     def views(self) -> list[View]:
@@ -96,7 +115,8 @@ class StateCapture:
         if not self.captured:
             return []
         c = self.cameras
-        return [View(v.id, v.split, Camera(c.intrinsics, v.c2w), self.dir, c.depth_scale, v.extra) for v in c.views]
+        return [View(v.id, v.split, Camera(c.intrinsics, v.c2w), self.dir, c.depth_scale, v.extra, self.root)
+                for v in c.views]
 
     def split(self, name: str) -> list[View]:
         """Views of split ``name`` ("train" | "test")."""
@@ -114,13 +134,16 @@ class StateCapture:
 
 
 class RSArtObject:
-    """One object folder: ``meta``, ``parts``, ``joints``, ``states`` (by id), ``twin`` (lazy)."""
+    """One object folder: ``meta``, ``parts``, ``joints``, ``states`` (by id), ``twin`` (lazy).
 
-    def __init__(self, path: str | os.PathLike, meta: ObjectMeta | None = None):
+    ``root``: the folder nothing may be read outside of (default: the object folder itself)."""
+
+    def __init__(self, path: str | os.PathLike, meta: ObjectMeta | None = None, root: str | os.PathLike | None = None):
         self.path = Path(path)
-        self.meta = meta or read_meta(self.path)
+        self.root = Path(root) if root is not None else self.path
+        self.meta = meta or read_meta(check_inside(self.root, self.path / "meta.json"))
         self.states: Mapping[str, StateCapture] = {
-            s.id: StateCapture(s, self.path / "states" / s.id) for s in self.meta.states}
+            s.id: StateCapture(s, self.path / "states" / s.id, self.root) for s in self.meta.states}
 
     id = property(lambda self: self.meta.object_id)
     category = property(lambda self: self.meta.category)
@@ -197,7 +220,7 @@ class Dataset(Mapping[str, RSArtObject]):
 
     def __init__(self, root: str | os.PathLike):
         self.root = Path(root)
-        self.index: DatasetIndex = read_index(self.root / "index.json")
+        self.index: DatasetIndex = read_index(check_inside(self.root, self.root / "index.json"))
         self._cache: dict[str, RSArtObject] = {}
 
     name = property(lambda self: self.index.name)
@@ -208,7 +231,7 @@ class Dataset(Mapping[str, RSArtObject]):
         if object_id not in self.index.objects:
             raise KeyError(f"{self.root}: no object {object_id!r}")
         if object_id not in self._cache:
-            self._cache[object_id] = RSArtObject(self.root / object_id)
+            self._cache[object_id] = RSArtObject(check_inside(self.root, self.root / object_id), root=self.root)
         return self._cache[object_id]
 
     def __iter__(self) -> Iterator[str]:

@@ -20,7 +20,7 @@ import numpy as np
 
 from .camera import Camera, Intrinsics
 from .errors import Problems, RsartError, ValidationError
-from .io import read_json, write_json
+from .io import check_inside, read_json, write_json
 
 FORMAT = "rsart/1"
 JOINT_TYPES = ("revolute", "prismatic")
@@ -563,17 +563,20 @@ def write_index(index: DatasetIndex, path: str | Path) -> None:
                       "objects": index.objects, "splits": index.splits, **index.extra})
 
 
-def validate_path(path: str | Path) -> list[str]:
+def validate_path(path: str | Path, root: str | Path | None = None) -> list[str]:
     """Validate a meta.json, cameras.json, index.json, an object folder or a dataset root.
 
-    Returns the list of problem lines (empty when valid); used by ``rsart validate``.
+    Returns the list of problem lines (empty when valid); used by ``rsart validate``. Nothing outside
+    ``root`` (default: ``path`` itself, or its folder for a file) is read: a file or state folder whose
+    symlinks lead out of it is reported without being opened or listed (:func:`rsart.io.check_inside`).
     """
     path = Path(path)
+    root = Path(root) if root is not None else (path.parent if path.is_file() else path)
     out: list[str] = []
 
     def run(fn, p):
         try:
-            fn(p)
+            fn(check_inside(root, p))
         except ValidationError as e:
             out.extend(f"{p}: {x}" for x in e.problems)
         except RsartError as e:
@@ -588,11 +591,26 @@ def validate_path(path: str | Path) -> list[str]:
         run(read_index, path / "index.json")
         if not out:
             for oid in read_index(path).objects:
-                out.extend(validate_path(path / oid))
+                try:
+                    out.extend(validate_path(check_inside(root, path / oid), root))
+                except RsartError as e:
+                    out.append(str(e))
     elif (path / "meta.json").exists():
         run(read_meta, path / "meta.json")
-        for cams in sorted((path / "states").glob("*/cameras.json")):
-            run(read_cameras, cams)
+        states = path / "states"
+        try:
+            subdirs = sorted(d for d in check_inside(root, states).iterdir()) if states.is_dir() else []
+        except RsartError as e:
+            out.append(str(e))
+            subdirs = []
+        for d in subdirs:  # each state folder is checked before anything in it is listed or read
+            try:
+                check_inside(root, d)
+            except RsartError as e:
+                out.append(str(e))
+                continue
+            if (d / "cameras.json").is_file():
+                run(read_cameras, d / "cameras.json")
     else:
         out.append(f"{path}: neither a dataset root (index.json) nor an object folder (meta.json)")
     return out

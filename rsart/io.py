@@ -202,14 +202,34 @@ def sha256_file(path: str | os.PathLike, chunk: int = 1 << 20) -> str:
 
 
 def resolve_inside(root: str | os.PathLike, rel: str) -> Path:
-    """Resolve ``rel`` against ``root`` and refuse anything (absolute, ``..``, symlink) that leaves ``root``."""
+    """Resolve ``rel`` against ``root`` and refuse anything (absolute, ``..``, symlink) that leaves ``root``.
+
+    This is rsart's one inside-the-folder rule (mesh paths of twins and submissions, URDF meshes, every
+    file ``rsart.load``, ``verify``, ``validate`` and the renderer read). Resolving only reads links, it
+    opens nothing, so a file outside ``root`` is refused without being read. Symlinks whose target stays
+    inside ``root`` are allowed.
+    """
     root_r = Path(root).resolve()
     if os.path.isabs(rel):
         raise RsartError(f"{rel}: absolute paths are not allowed (must be relative to {root})")
-    p = (root_r / rel).resolve()
+    try:
+        p = (root_r / rel).resolve()
+    except (OSError, RuntimeError) as e:  # a symlink loop
+        raise RsartError(f"{rel}: cannot be resolved ({e})") from None
     if p != root_r and root_r not in p.parents:
         raise RsartError(f"{rel}: path leaves {root}")
     return p
+
+
+def check_inside(root: str | os.PathLike, path: str | os.PathLike) -> Path:
+    """``path`` (a path under ``root``) unchanged when it stays inside ``root`` after following every
+    symlink on the way; else RsartError naming it. See :func:`resolve_inside`; nothing is opened."""
+    try:
+        resolve_inside(root, os.path.relpath(path, root))
+    except RsartError:
+        raise RsartError(f"{path}: leads out of {root} (through a symlink or '..'); refused without "
+                         "reading it") from None
+    return Path(path)
 
 
 def copy_folder_contents(src: str | os.PathLike, dst: str | os.PathLike, skip: tuple[str, ...] = ()) -> None:

@@ -16,7 +16,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser("verify", help="check a dataset's files against recorded SHA-256 checksums",
                        description="Compare every file under ROOT with ROOT/checksums.sha256. Reports missing, "
-                                   "extra and corrupt files. Exit 0 clean, 1 problems found, 2 no checksum file.")
+                                   "extra and corrupt files, and images whose size is not their camera's (PNG headers only). "
+                                   "Files or folders whose symlinks lead out of ROOT are refused unread. Exit 0 "
+                                   "clean, 1 problems found, 2 no checksum file or a symlink leading out of ROOT.")
     p.add_argument("root", type=Path)
     p.add_argument("--write", action="store_true", help="(re)record the checksums instead of checking them")
     p.set_defaults(func=_verify)
@@ -52,14 +54,20 @@ def _verify(args) -> int:
         path = write_checksums(args.root)
         print(f"wrote {path}")
         return 0
+    from ..errors import escape_controls
+
     rep = verify(args.root)
-    for kind in ("missing", "extra", "corrupt"):
+    for f in rep.outside:  # refused, never read: invalid input (exit 2)
+        print(f"error: {escape_controls(str(args.root / f))}: leads out of {escape_controls(str(args.root))} "
+              "(through a symlink); refused without reading it", file=sys.stderr)
+    for kind in ("missing", "extra", "corrupt", "wrong_size"):
         for f in getattr(rep, kind):
-            print(f"{kind}: {f}")
+            print(f"{kind.replace('_', ' ')}: {escape_controls(f)}")
     status = "ok" if rep.ok else "PROBLEMS"
-    print(f"{args.root}: {status} ({rep.checked} checked, {len(rep.missing)} missing, {len(rep.extra)} extra, "
-          f"{len(rep.corrupt)} corrupt)")
-    return 0 if rep.ok else 1
+    print(f"{escape_controls(str(args.root))}: {status} ({rep.checked} checked, {len(rep.missing)} missing, "
+          f"{len(rep.extra)} extra, {len(rep.corrupt)} corrupt, {len(rep.wrong_size)} wrong size, "
+          f"{len(rep.outside)} leading outside)")
+    return 2 if rep.outside else 0 if rep.ok else 1
 
 
 def _info(args) -> int:

@@ -4,6 +4,9 @@
   files except ``states/`` and ``render.json``) to ``<out>/<object_id>/``, or rendered in place
   when it already is that folder;
 * a dataset root (``index.json``): every object folder it lists;
+
+Nothing outside the folder given is read: its ``meta.json``/``index.json`` and object folders must stay
+inside after following symlinks (:func:`rsart.io.check_inside`), and the copy refuses every symlink.
 * a bare URDF (``.urdf``) or USD (``.usd``, ``.usda``, ``.usdc``) file: read into a twin and
   written as ``<out>/<stem>/`` with the RS-Art states (:func:`rsart.twin_io.write_object`).
 """
@@ -14,7 +17,7 @@ from pathlib import Path
 
 from ..errors import RsartError
 from ..format import meta_to_dict, read_index, read_meta
-from ..io import atomic_dir, copy_folder_contents
+from ..io import atomic_dir, check_inside, copy_folder_contents
 
 URDF_SUFFIXES = (".urdf",)
 USD_SUFFIXES = (".usd", ".usda", ".usdc")
@@ -28,8 +31,8 @@ def _twin_signature(meta_dict: dict) -> dict:
     return d
 
 
-def _copy_object(src: Path, dest: Path, overwrite: bool) -> Path:
-    src_meta = read_meta(src)
+def _copy_object(src: Path, dest: Path, overwrite: bool, root: Path) -> Path:
+    src_meta = read_meta(check_inside(root, src / "meta.json"))
     if dest.exists() and (dest / "meta.json").exists():
         if src.resolve() == dest.resolve():
             return dest
@@ -77,11 +80,11 @@ def object_dirs(src: str | Path, out_root: Path, overwrite: bool = False) -> lis
         raise RsartError(f"{src}: no such file or folder")
     if src.is_dir():
         if (src / "meta.json").is_file():
-            meta = read_meta(src)
-            return [_copy_object(src, out_root / meta.object_id, overwrite)]
-        if (src / "index.json").is_file():
-            idx = read_index(src)
-            return [_copy_object(src / oid, out_root / oid, overwrite) for oid in idx.objects]
+            meta = read_meta(check_inside(src, src / "meta.json"))
+            return [_copy_object(src, out_root / meta.object_id, overwrite, src)]
+        if (src / "index.json").is_file():  # nothing outside the root is read (symlinks in copies: refused)
+            idx = read_index(check_inside(src, src / "index.json"))
+            return [_copy_object(check_inside(src, src / oid), out_root / oid, overwrite, src) for oid in idx.objects]
         raise RsartError(f"{src}: neither an object folder (meta.json) nor a dataset root (index.json)")
     suffix = src.suffix.lower()
     if suffix in URDF_SUFFIXES + USD_SUFFIXES:
