@@ -3,8 +3,12 @@
 Refused, with a message naming the entry: not a zip; too many entries; an absolute path, a drive letter,
 a backslash, a NUL or a ``..`` component (zip-slip); a symlink or any non-regular entry; duplicate names;
 a declared or an *actual* uncompressed size over the limit; a compression ratio over ``max_ratio``
-(zip bomb — sizes are counted while inflating, the headers are not trusted). Extraction goes to a
-temporary sibling folder renamed into place only when complete.
+(zip bomb — sizes are counted while inflating, the headers are not trusted). The whole archive has limits
+too, also checked while inflating: its expanded size (``max_unpacked_bytes``) and its overall ratio
+(bytes written / size of the zip, ``max_total_ratio`` once more than ``ratio_floor_bytes`` are written), so a
+bomb split into many small entries (1000 × 1 MiB of zeros) is stopped after a few tens of MiB. Extraction
+goes to a temporary sibling folder renamed into place only when complete; a crash leaves only that
+``.*.partial`` folder, which the server removes at start-up.
 """
 from __future__ import annotations
 
@@ -31,6 +35,8 @@ class ArchiveLimits:
     max_unpacked_bytes: int = 1024 ** 3         # everything inflated
     max_entries: int = 20000
     max_ratio: float = 200.0                    # inflated / compressed, per entry (only above 1 MiB)
+    max_total_ratio: float = 50.0               # everything inflated / the zip's size
+    ratio_floor_bytes: int = 32 * 1024 ** 2     # ... checked once this much is inflated (small text is fine)
 
 
 def _check_name(name: str) -> PurePosixPath:
@@ -58,6 +64,7 @@ def _entry_kind(info: zipfile.ZipInfo) -> str:
 def extract_zip(zip_path: str | Path, dest: str | Path, limits: ArchiveLimits = ArchiveLimits()) -> Path:
     """Extract ``zip_path`` into the new folder ``dest`` (must not exist) → ``dest``; ArchiveError if unsafe."""
     zip_path, dest = Path(zip_path), Path(dest)
+    zip_size = max(zip_path.stat().st_size, 1)
     if zip_path.stat().st_size > limits.max_upload_bytes:
         raise ArchiveError(f"archive is {zip_path.stat().st_size} bytes; the limit is {limits.max_upload_bytes}")
     if not zipfile.is_zipfile(zip_path):
@@ -109,6 +116,10 @@ def extract_zip(zip_path: str | Path, dest: str | Path, limits: ArchiveLimits = 
                         if written > 1 << 20 and written > limits.max_ratio * max(info.compress_size, 1):
                             raise ArchiveError(f"entry {info.filename!r}: compression ratio above "
                                                f"{limits.max_ratio:.0f} (zip bomb?)")
+                        if total > limits.ratio_floor_bytes and total > limits.max_total_ratio * zip_size:
+                            raise ArchiveError(f"entry {info.filename!r}: the archive inflates to more than "
+                                               f"{limits.max_total_ratio:.0f} times its {zip_size} bytes "
+                                               "(zip bomb?)")
                         dst.write(buf)
     except zipfile.BadZipFile as e:
         shutil.rmtree(tmp, ignore_errors=True)

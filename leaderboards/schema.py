@@ -3,7 +3,8 @@
 Tables: ``methods``; ``submissions`` (method block, toolkit version, eval-config hash, dataset name/version/
 split, track, team); ``scores`` (one row per object / part / metric / state: a value, or a failure with
 its reason); ``aggregates`` (per category and the Mean over categories, as rsart-eval computes them);
-and the server's ``tokens`` (SHA-256 of each token, never the token) and ``jobs`` (the durable queue).
+and the server's ``tokens`` (SHA-256 of each token, never the token), ``jobs`` (the durable queue, with each
+running job's ``heartbeat_at`` lease) and ``upload_attempts`` (what the per-token rate limit counts).
 
 ``open_engine(url)`` accepts any SQLAlchemy URL or a plain file path (→ SQLite). SQLite runs in WAL mode
 with a busy timeout, so the server and its worker processes can share one file.
@@ -109,9 +110,18 @@ jobs = Table(
     Column("created_at", Float, nullable=False),
     Column("started_at", Float),
     Column("finished_at", Float),
+    Column("heartbeat_at", Float),  # the running worker's lease: refreshed every few seconds while it scores
 )
 Index("ix_jobs_status", jobs.c.status, jobs.c.created_at)
 Index("ix_jobs_token", jobs.c.token_id, jobs.c.created_at)
+
+upload_attempts = Table(  # every upload attempt, accepted or refused: the per-token rate limit counts these
+    "upload_attempts", metadata,
+    Column("id", Integer, primary_key=True),
+    Column("token_id", Integer, ForeignKey("tokens.id"), nullable=False),
+    Column("created_at", Float, nullable=False),
+)
+Index("ix_upload_attempts_token", upload_attempts.c.token_id, upload_attempts.c.created_at)
 
 MEAN = "__mean__"
 
@@ -153,6 +163,7 @@ def open_engine(url: str, create: bool = True) -> Engine:
     if create:
         metadata.create_all(engine)
         _add_scorer_version(engine)
+        _add_job_lease_column(engine)
     return engine
 
 
@@ -163,3 +174,17 @@ def _add_scorer_version(engine: Engine) -> None:
     if "scorer_version" not in {c["name"] for c in inspect(engine).get_columns("submissions")}:
         with engine.begin() as conn:
             conn.execute(text("ALTER TABLE submissions ADD COLUMN scorer_version VARCHAR(20) NOT NULL DEFAULT '0'"))
+
+
+def _add_job_lease_column(engine: Engine) -> None:
+    """Queues made before job leases get the ``jobs.heartbeat_at`` column (create_all adds only tables)."""
+    from sqlalchemy import inspect, text
+
+    have = {c["name"] for c in inspect(engine).get_columns("jobs")}
+    if "heartbeat_at" not in have:
+        try:
+            with engine.begin() as c:
+                c.execute(text("ALTER TABLE jobs ADD COLUMN heartbeat_at FLOAT"))
+        except Exception:  # another process added it first
+            if "heartbeat_at" not in {c["name"] for c in inspect(engine).get_columns("jobs")}:
+                raise

@@ -12,7 +12,13 @@ API (docs/leaderboard.md):
 * ``GET /`` — the live leaderboard (same tables as the static site; reloads when a new score lands).
 
 Uploads are written atomically (temp + rename) under ``<work>/``; the queue is the database's ``jobs``
-table, so a crash or restart loses nothing (``recover`` requeues interrupted jobs at start-up).
+table, so a crash or restart loses nothing. At start-up the server removes its own leftovers of a crash
+(:func:`clean_work`: ``incoming/`` files, ``.partial`` extraction folders, job folders never queued) and
+re-queues jobs whose worker is gone (expired lease, :mod:`leaderboards.jobs`). Every upload attempt counts
+toward the per-token rate limit, and at most ``max_unpacking`` archives are inflated at once.
+
+The app is three routers (:func:`submissions_router`, :func:`api_router`, :func:`pages_router`) sharing one
+:class:`AppState`, behind the :class:`BodyLimit` middleware.
 """
 from __future__ import annotations
 
@@ -23,8 +29,9 @@ import sys
 import threading
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
-from fastapi import FastAPI, Request
+from fastapi import APIRouter, FastAPI, Request
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import HTMLResponse, JSONResponse
 
@@ -66,6 +73,7 @@ class ServerConfig:
     work: Path
     archive: ArchiveLimits = ArchiveLimits()
     scoring: ScoringSettings = ScoringSettings()
+    max_unpacking: int = 2   # archives inflated and validated at once (the others wait their turn)
 
 
 def _error(status: int, message: str, problems: list | None = None, headers: dict | None = None) -> JSONResponse:
@@ -96,31 +104,39 @@ class BodyLimit:
         await self.app(scope, receive, send)
 
 
-def create_app(cfg: ServerConfig) -> FastAPI:
-    from rsart.evaluation.ground_truth import load_ground_truth
-    from rsart.evaluation.submission import Limits, read_submission
+@dataclass
+class AppState:
+    """What the routers share: the config, the store, the ground truth and the upload bookkeeping."""
 
-    engine = open_engine(cfg.db)
-    gt = load_ground_truth(cfg.data)
-    limits = Limits(max_mesh_bytes=int(cfg.scoring.max_mesh_mb * 1024 ** 2), max_total_bytes=cfg.archive.max_unpacked_bytes)
-    for d in ("incoming", "jobs"):
-        (cfg.work / d).mkdir(parents=True, exist_ok=True)
-    rate_lock = threading.Lock()
-    app = FastAPI(title="rsart leaderboard", docs_url=None, redoc_url=None, openapi_url=None)
+    cfg: ServerConfig
+    engine: Any
+    gt: Any
+    limits: Any                      # rsart.evaluation.submission.Limits for reading uploaded submissions
+    rate_lock: threading.Lock        # record + count an attempt atomically
+    unpack_slots: threading.Semaphore  # at most cfg.max_unpacking archives inflated at once
 
-    def _auth(request: Request) -> dict | None:
+    def auth(self, request: Request) -> dict | None:
         h = request.headers.get("authorization", "")
         if not h.lower().startswith("bearer "):
             return None
-        return J.lookup_token(engine, h[7:].strip())
+        return J.lookup_token(self.engine, h[7:].strip())
+
+
+def submissions_router(st: AppState) -> APIRouter:
+    """``POST /api/submissions`` (upload → validate → queue) and ``GET /api/jobs/{id}``."""
+    from rsart.evaluation.submission import read_submission
+
+    r = APIRouter()
+    cfg = st.cfg
 
     def _validate(job_id: str, zip_path: Path) -> tuple[Path, Path, str]:
         folder = cfg.work / "jobs" / job_id / "submission"
         folder.parent.mkdir(parents=True, exist_ok=True)
         try:
-            extract_zip(zip_path, folder, cfg.archive)
+            with st.unpack_slots:  # inflating is the expensive, attacker-driven part: a bounded number at once
+                extract_zip(zip_path, folder, cfg.archive)
             sub_file = find_submission_file(folder)
-            sub, problems = read_submission(sub_file, gt, limits)
+            sub, problems = read_submission(sub_file, st.gt, st.limits)
             if problems or sub is None:
                 raise _Invalid(problems)
             return folder, sub_file, str(sub.method.get("name", ""))
@@ -130,13 +146,15 @@ def create_app(cfg: ServerConfig) -> FastAPI:
         finally:
             zip_path.unlink(missing_ok=True)
 
-    @app.post(UPLOAD_PATH)
+    @r.post(UPLOAD_PATH)
     async def upload(request: Request):
-        token = _auth(request)
+        token = st.auth(request)
         if token is None:
             return _error(401, "missing or invalid token (header: Authorization: Bearer <token>)",
                           headers={"WWW-Authenticate": "Bearer"})
-        if J.uploads_last_hour(engine, token["id"]) >= token["rate_per_hour"]:
+        with st.rate_lock:  # every attempt counts, accepted or refused (a refused archive costs work too)
+            n = J.record_attempt(st.engine, token["id"])
+        if n > token["rate_per_hour"]:
             return _error(429, f"rate limit: {token['rate_per_hour']} uploads per hour for this token",
                           headers={"Retry-After": "3600"})
         ctype = request.headers.get("content-type", "")
@@ -145,6 +163,7 @@ def create_app(cfg: ServerConfig) -> FastAPI:
         form = await request.form(max_files=1, max_fields=4)
         up = form.get("archive")
         if up is None or isinstance(up, str):
+            await form.close()
             return _error(422, "multipart field 'archive' (the zip file) is missing")
         job_id = J.new_job_id()
         part = cfg.work / "incoming" / f"{job_id}.zip.partial"
@@ -166,70 +185,119 @@ def create_app(cfg: ServerConfig) -> FastAPI:
             root = str(cfg.work / "jobs" / job_id / "submission") + os.sep
             return _error(422, f"invalid submission: {len(e.problems)} problem(s)",
                           problems=[{"path": p.path, "message": p.message.replace(root, "")} for p in e.problems])
-        with rate_lock:  # re-check under the lock so concurrent uploads cannot overrun the limit
-            if J.uploads_last_hour(engine, token["id"]) >= token["rate_per_hour"]:
-                shutil.rmtree(folder.parent, ignore_errors=True)
-                return _error(429, f"rate limit: {token['rate_per_hour']} uploads per hour for this token",
-                              headers={"Retry-After": "3600"})
-            J.enqueue(engine, job_id, token, str(folder), str(sub_file), method)
+        J.enqueue(st.engine, job_id, token, str(folder), str(sub_file), method)
         return JSONResponse({"job_id": job_id, "status": "queued", "method": method}, status_code=202)
 
-    @app.get("/api/jobs/{job_id}")
+    @r.get("/api/jobs/{job_id}")
     def job_status(job_id: str):
-        j = J.get_job(engine, job_id) if job_id.isalnum() else None
+        j = J.get_job(st.engine, job_id) if job_id.isalnum() else None
         if j is None:
             return _error(404, f"no job {job_id!r}")
         return {k: j[k] for k in ("id", "status", "error", "submission_id", "method_name", "team", "attempts")}
 
-    @app.get("/api/version")
-    def version():
-        return live_version(engine)
+    return r
 
-    @app.get("/api/leaderboard")
+
+def api_router(st: AppState) -> APIRouter:
+    """The JSON read API: ``/api/version`` (what the live page polls), ``/api/leaderboard``, ``/healthz``."""
+    r = APIRouter()
+
+    @r.get("/api/version")
+    def version():
+        return live_version(st.engine)
+
+    @r.get("/api/leaderboard")
     def leaderboard():
         return [{"id": s.id, "method": s.method_name, "version": s.method_version, "team": s.team,
                  "dataset": s.dataset_label, "track": s.track, "n_objects": s.n_objects,
                  "n_failed_objects": s.n_failed_objects,
                  "mean": {m: {"value": v, "n": n, "n_failed": nf} for m, (v, n, nf) in s.agg.get(MEAN, {}).items()}}
-                for s in list_submissions(engine)]
+                for s in list_submissions(st.engine)]
 
-    @app.get("/", response_class=HTMLResponse)
+    @r.get("/healthz")
+    def healthz():
+        return {"ok": True}
+
+    return r
+
+
+def pages_router(st: AppState) -> APIRouter:
+    """HTML: the live leaderboard (``/``) and the static site's pages that make sense live."""
+    r = APIRouter()
+
+    @r.get("/", response_class=HTMLResponse)
     def live():
         from .exports import index_body
 
         # stamp first, then read: a score landing in between is shown and then costs one extra reload,
         # never a missed one
-        stamp = live_version(engine)["key"]
+        stamp = live_version(st.engine)["key"]
         body = ('<p class="note">Live page: reloads when a new submission is scored. Upload: '
                 '<code>curl -H "Authorization: Bearer $TOKEN" -F archive=@sub.zip HOST/api/submissions</code>.</p>'
-                + index_body(engine, list_submissions(engine)))
+                + index_body(st.engine, list_submissions(st.engine)))
         head = f'<meta name="{VERSION_META}" content="{esc(stamp)}">'
         return page("rsart leaderboard (live)", body, extra_head=head, extra_js=LIVE_JS)
 
-    @app.get("/published.html", response_class=HTMLResponse)
+    @r.get("/published.html", response_class=HTMLResponse)
     def published():
         from .exports import published_page
 
         return published_page()
 
-    @app.get("/metrics.html", response_class=HTMLResponse)
+    @r.get("/metrics.html", response_class=HTMLResponse)
     def metrics():
         from .site import metrics_page
 
         return metrics_page()
 
-    @app.get("/methods.html", response_class=HTMLResponse)
-    @app.get("/downloads.html", response_class=HTMLResponse)
+    @r.get("/methods.html", response_class=HTMLResponse)
+    @r.get("/downloads.html", response_class=HTMLResponse)
     def static_only():
         return page("Static site only", "<p>Method pages, plots and the Markdown/CSV exports are part of the static "
                     "site: <code>rsart leaderboard build --db URL --out site/</code>. The JSON rows are at "
                     '<a href="api/leaderboard">api/leaderboard</a>.</p>')
 
-    @app.get("/healthz")
-    def healthz():
-        return {"ok": True}
+    return r
 
+
+def create_app(cfg: ServerConfig) -> FastAPI:
+    """The ASGI app: the three routers behind the upload-size middleware."""
+    from rsart.evaluation.ground_truth import load_ground_truth
+    from rsart.evaluation.submission import Limits
+
+    for d in ("incoming", "jobs"):
+        (cfg.work / d).mkdir(parents=True, exist_ok=True)
+    st = AppState(cfg, open_engine(cfg.db), load_ground_truth(cfg.data),
+                  Limits(max_mesh_bytes=int(cfg.scoring.max_mesh_mb * 1024 ** 2),
+                         max_total_bytes=cfg.archive.max_unpacked_bytes),
+                  threading.Lock(), threading.Semaphore(max(1, cfg.max_unpacking)))
+    app = FastAPI(title="rsart leaderboard", docs_url=None, redoc_url=None, openapi_url=None)
+    for router in (submissions_router(st), api_router(st), pages_router(st)):
+        app.include_router(router)
     return BodyLimit(app, cfg.archive.max_upload_bytes + 64 * 1024)
+
+
+def clean_work(cfg: ServerConfig, engine) -> list[Path]:
+    """Remove this server's own leftovers of a crash (run at start-up, before any upload is accepted):
+    everything in ``<work>/incoming/`` (uploads being received or not yet unpacked), every ``.partial``
+    extraction folder, and job folders the queue does not know (an upload killed before it was queued).
+    → the removed paths."""
+    removed: list[Path] = []
+    incoming, jobs_dir = cfg.work / "incoming", cfg.work / "jobs"
+    for p in sorted(incoming.iterdir()) if incoming.is_dir() else []:
+        shutil.rmtree(p) if p.is_dir() and not p.is_symlink() else p.unlink(missing_ok=True)
+        removed.append(p)
+    for d in sorted(jobs_dir.iterdir()) if jobs_dir.is_dir() else []:
+        if not d.is_dir() or d.is_symlink():
+            continue
+        if J.get_job(engine, d.name) is None:
+            shutil.rmtree(d, ignore_errors=True)
+            removed.append(d)
+            continue
+        for p in d.glob(".*.partial"):
+            shutil.rmtree(p, ignore_errors=True)
+            removed.append(p)
+    return removed
 
 
 class _Invalid(Exception):
@@ -262,7 +330,12 @@ def serve(cfg: ServerConfig, host: str = "127.0.0.1", port: int = 8000, workers:
     import uvicorn
 
     engine = open_engine(cfg.db)
-    n = J.recover(engine)
+    for d in ("incoming", "jobs"):
+        (cfg.work / d).mkdir(parents=True, exist_ok=True)
+    removed = clean_work(cfg, engine)
+    if removed:
+        print(f"removed {len(removed)} leftover(s) of an interrupted run under {cfg.work}", file=sys.stderr)
+    n = J.recover(engine)  # only jobs whose worker is gone (expired lease); idle workers re-check later
     if n:
         print(f"requeued {n} interrupted job(s)", file=sys.stderr)
     app = create_app(cfg)

@@ -3,7 +3,13 @@
 A worker is a separate process (``python -m leaderboards.worker``, started by ``rsart leaderboard serve``).
 It validates the submission exactly as ``rsart-eval`` does (structure, files, then every mesh's content),
 scores it with one process, writes ``scores.json`` and ``summary.md`` to ``<work>/jobs/<id>/eval`` and ingests them
-(idempotently, so a job re-run after a crash never duplicates an entry). It exits when its parent dies.
+(idempotently, so a job re-run after a crash never duplicates an entry).
+
+Leases (:mod:`leaderboards.jobs`): while scoring, a thread refreshes the job's heartbeat every
+``HEARTBEAT_S`` and checks that the parent (the server) is alive; when the parent is gone the worker stops
+at once, mid-job, without finishing it (the job is re-queued when its lease expires, so a restarted server
+never has two workers scoring it). Between jobs it exits when its parent dies, and while idle it re-queues
+jobs whose lease expired (their worker died).
 """
 from __future__ import annotations
 
@@ -11,12 +17,13 @@ import argparse
 import logging
 import os
 import sys
+import threading
 import time
 import traceback
 from dataclasses import dataclass
 from pathlib import Path
 
-from .jobs import claim, finish
+from .jobs import HEARTBEAT_S, LEASE_S, claim, finish, heartbeat, recover
 from .schema import open_engine
 from .store import add_scores
 
@@ -91,11 +98,41 @@ def score_job(job: dict, data_root: Path, work: Path, settings: ScoringSettings,
     return sid
 
 
+class Lease(threading.Thread):
+    """While a job is scored: refresh its lease every ``HEARTBEAT_S``; end the process if the parent is gone."""
+
+    def __init__(self, engine, job: dict, parent_pid: int | None):
+        super().__init__(daemon=True, name=f"lease-{job['id']}")
+        self.engine, self.job, self.parent_pid = engine, job, parent_pid
+        self.done = threading.Event()
+
+    def run(self) -> None:
+        while not self.done.wait(HEARTBEAT_S):
+            if self.parent_pid is not None and os.getppid() != self.parent_pid:
+                log.warning("server (pid %s) gone while scoring job %s: stopping; the job is re-queued when its "
+                            "lease expires", self.parent_pid, self.job["id"])
+                os._exit(3)  # mid-job: nothing is finished or ingested by an orphan
+            try:
+                heartbeat(self.engine, self.job["id"], self.job["worker"])
+            except Exception as e:  # a busy database: the next beat retries (the lease allows several misses)
+                log.warning("heartbeat of job %s failed: %s", self.job["id"], e)
+
+    def __enter__(self) -> "Lease":
+        self.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.done.set()
+        self.join()
+
+
 def run_worker(db: str, data_root: Path, work: Path, settings: ScoringSettings, name: str,
                poll_s: float = 0.3, parent_pid: int | None = None, max_idle_s: float | None = None) -> None:
-    """Loop: claim → score → finish. Stops when the parent process is gone (or after ``max_idle_s`` idle)."""
+    """Loop: claim → score (under a :class:`Lease`) → finish. Stops when the parent process is gone (or after
+    ``max_idle_s`` idle); while idle, re-queues jobs whose lease expired."""
     engine = open_engine(db)
     idle_since = time.monotonic()
+    next_recover = 0.0
     while True:
         if parent_pid is not None and os.getppid() != parent_pid:
             return
@@ -103,10 +140,16 @@ def run_worker(db: str, data_root: Path, work: Path, settings: ScoringSettings, 
         if job is None:
             if max_idle_s is not None and time.monotonic() - idle_since > max_idle_s:
                 return
+            if time.monotonic() >= next_recover:
+                n = recover(engine)
+                if n:
+                    log.info("re-queued %d job(s) whose worker is gone (lease expired)", n)
+                next_recover = time.monotonic() + LEASE_S / 2
             time.sleep(poll_s)
             continue
         try:
-            sid = score_job(job, data_root, work, settings, engine)
+            with Lease(engine, job, parent_pid):
+                sid = score_job(job, data_root, work, settings, engine)
             finish(engine, job["id"], submission_id=sid)
             log.info("job %s scored -> submission %s", job["id"], sid)
         except JobError as e:
