@@ -12,8 +12,10 @@ API (docs/leaderboard.md):
 * ``GET /`` — the live leaderboard (same tables as the static site; reloads when a new score lands).
 
 Uploads are written atomically (temp + rename) under ``<work>/``; the queue is the database's ``jobs``
-table, so a crash or restart loses nothing. At start-up the server removes its own leftovers of a crash
-(:func:`clean_work`: ``incoming/`` files, ``.partial`` extraction folders, job folders never queued) and
+table, so a crash or restart loses nothing. Uploads are received, unpacked and validated in the server's
+own staging folder (:func:`incoming_dir`) and moved into ``<work>/jobs/<id>/`` just before being queued. At
+start-up the server removes its own leftovers of a crash (:func:`clean_work`: everything in its staging
+folder, i.e. ``<id>.zip`` files and ``.partial`` extraction folders, and job folders never queued) and
 re-queues jobs whose worker is gone (expired lease, :mod:`leaderboards.jobs`). Every upload attempt counts
 toward the per-token rate limit, and at most ``max_unpacking`` archives are inflated at once.
 
@@ -23,10 +25,13 @@ The app is three routers (:func:`submissions_router`, :func:`api_router`, :func:
 from __future__ import annotations
 
 import os
+import re
 import shutil
+import socket
 import subprocess
 import sys
 import threading
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -130,8 +135,10 @@ def submissions_router(st: AppState) -> APIRouter:
     cfg = st.cfg
 
     def _validate(job_id: str, zip_path: Path) -> tuple[Path, Path, str]:
-        folder = cfg.work / "jobs" / job_id / "submission"
-        folder.parent.mkdir(parents=True, exist_ok=True)
+        """Unpack and validate in this server's staging folder, then move the job folder into ``jobs/``."""
+        staging = incoming_dir(cfg) / job_id
+        folder = staging / "submission"
+        staging.mkdir(parents=True, exist_ok=True)
         try:
             with st.unpack_slots:  # inflating is the expensive, attacker-driven part: a bounded number at once
                 extract_zip(zip_path, folder, cfg.archive)
@@ -139,9 +146,11 @@ def submissions_router(st: AppState) -> APIRouter:
             sub, problems = read_submission(sub_file, st.gt, st.limits)
             if problems or sub is None:
                 raise _Invalid(problems)
-            return folder, sub_file, str(sub.method.get("name", ""))
+            final = cfg.work / "jobs" / job_id
+            os.replace(staging, final)
+            return final / "submission", final / sub_file.relative_to(staging), str(sub.method.get("name", ""))
         except BaseException:
-            shutil.rmtree(folder.parent, ignore_errors=True)
+            shutil.rmtree(staging, ignore_errors=True)
             raise
         finally:
             zip_path.unlink(missing_ok=True)
@@ -166,8 +175,8 @@ def submissions_router(st: AppState) -> APIRouter:
             await form.close()
             return _error(422, "multipart field 'archive' (the zip file) is missing")
         job_id = J.new_job_id()
-        part = cfg.work / "incoming" / f"{job_id}.zip.partial"
-        dest = cfg.work / "incoming" / f"{job_id}.zip"
+        part = incoming_dir(cfg) / f"{job_id}.zip.partial"
+        dest = incoming_dir(cfg) / f"{job_id}.zip"
         try:
             with open(part, "wb") as f:
                 await run_in_threadpool(shutil.copyfileobj, up.file, f, 1 << 20)
@@ -182,7 +191,7 @@ def submissions_router(st: AppState) -> APIRouter:
         except ArchiveError as e:
             return _error(422, f"unsafe or unusable archive: {e}")
         except _Invalid as e:  # server folders are cut from the messages: paths are relative to the archive
-            root = str(cfg.work / "jobs" / job_id / "submission") + os.sep
+            root = str(incoming_dir(cfg) / job_id / "submission") + os.sep
             return _error(422, f"invalid submission: {len(e.problems)} problem(s)",
                           problems=[{"path": p.path, "message": p.message.replace(root, "")} for p in e.problems])
         J.enqueue(st.engine, job_id, token, str(folder), str(sub_file), method)
@@ -265,8 +274,8 @@ def create_app(cfg: ServerConfig) -> FastAPI:
     from rsart.evaluation.ground_truth import load_ground_truth
     from rsart.evaluation.submission import Limits
 
-    for d in ("incoming", "jobs"):
-        (cfg.work / d).mkdir(parents=True, exist_ok=True)
+    for d in (incoming_dir(cfg), cfg.work / "jobs"):
+        d.mkdir(parents=True, exist_ok=True)
     st = AppState(cfg, open_engine(cfg.db), load_ground_truth(cfg.data),
                   Limits(max_mesh_bytes=int(cfg.scoring.max_mesh_mb * 1024 ** 2),
                          max_total_bytes=cfg.archive.max_unpacked_bytes),
@@ -277,26 +286,32 @@ def create_app(cfg: ServerConfig) -> FastAPI:
     return BodyLimit(app, cfg.archive.max_upload_bytes + 64 * 1024)
 
 
-def clean_work(cfg: ServerConfig, engine) -> list[Path]:
-    """Remove this server's own leftovers of a crash (run at start-up, before any upload is accepted):
-    everything in ``<work>/incoming/`` (uploads being received or not yet unpacked), every ``.partial``
-    extraction folder, and job folders the queue does not know (an upload killed before it was queued).
-    → the removed paths."""
+def incoming_dir(cfg: ServerConfig) -> Path:
+    """This server's own staging folder, ``<work>/incoming/<host>/``: uploads being received, unpacked and
+    validated. Per host, so servers of several machines sharing one ``--work`` never remove each other's."""
+    host = re.sub(r"[^A-Za-z0-9_.-]", "_", socket.gethostname()).strip(".") or "host"
+    return cfg.work / "incoming" / host
+
+
+def clean_work(cfg: ServerConfig, engine, unqueued_age_s: float = 60.0) -> list[Path]:
+    """Remove this server's own leftovers of a crash (run at start-up, before any upload is accepted) → the
+    removed paths: everything in :func:`incoming_dir` (zips being received, ``.partial`` extraction folders,
+    archives being validated), and job folders the queue does not know that are older than
+    ``unqueued_age_s`` (a crash between moving a validated upload into ``jobs/`` and queueing it)."""
     removed: list[Path] = []
-    incoming, jobs_dir = cfg.work / "incoming", cfg.work / "jobs"
-    for p in sorted(incoming.iterdir()) if incoming.is_dir() else []:
-        shutil.rmtree(p) if p.is_dir() and not p.is_symlink() else p.unlink(missing_ok=True)
+    mine = incoming_dir(cfg)
+    for p in sorted(mine.iterdir()) if mine.is_dir() else []:
+        if p.is_dir() and not p.is_symlink():
+            shutil.rmtree(p, ignore_errors=True)
+        else:
+            p.unlink(missing_ok=True)
         removed.append(p)
+    jobs_dir = cfg.work / "jobs"
     for d in sorted(jobs_dir.iterdir()) if jobs_dir.is_dir() else []:
-        if not d.is_dir() or d.is_symlink():
-            continue
-        if J.get_job(engine, d.name) is None:
+        if d.is_dir() and not d.is_symlink() and J.get_job(engine, d.name) is None \
+                and time.time() - d.stat().st_mtime > unqueued_age_s:
             shutil.rmtree(d, ignore_errors=True)
             removed.append(d)
-            continue
-        for p in d.glob(".*.partial"):
-            shutil.rmtree(p, ignore_errors=True)
-            removed.append(p)
     return removed
 
 
@@ -330,8 +345,8 @@ def serve(cfg: ServerConfig, host: str = "127.0.0.1", port: int = 8000, workers:
     import uvicorn
 
     engine = open_engine(cfg.db)
-    for d in ("incoming", "jobs"):
-        (cfg.work / d).mkdir(parents=True, exist_ok=True)
+    for d in (incoming_dir(cfg), cfg.work / "jobs"):
+        d.mkdir(parents=True, exist_ok=True)
     removed = clean_work(cfg, engine)
     if removed:
         print(f"removed {len(removed)} leftover(s) of an interrupted run under {cfg.work}", file=sys.stderr)
