@@ -91,10 +91,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def print_problems(source: str, problems: list[Problem]) -> None:
-    n = len(problems)
-    print(f"{source}: invalid submission, {n} problem{'s' if n != 1 else ''}:", file=sys.stderr)
-    for pr in problems:
-        print(f"  - {pr}", file=sys.stderr)
+    """One problem on one line (``error: SUB: invalid submission: path: problem``), several as a count and
+    one line each; control characters escaped (:func:`rsart.errors.format_problems`)."""
+    from ..errors import format_problems
+
+    print(f"error: {format_problems(problems, f'{source}: invalid submission')}", file=sys.stderr)
 
 
 def validate(args, check_meshes: bool = True, workers: int | None = None):

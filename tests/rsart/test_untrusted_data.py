@@ -243,3 +243,13 @@ def test_meta_with_control_characters_validates_on_one_line(cabinet_dir):
     assert r.returncode == 2
     line = _one_line(r.stderr)
     assert line.startswith(f"error: {cabinet_dir / 'meta.json'}: joints[0].axis: zero-length"), line
+
+
+def test_rsart_eval_says_one_problem_on_one_line(capsys):
+    from rsart.evaluation.cli import print_problems
+
+    print_problems("sub.json", [Problem("results.a\nb.parts", "unknown object")])
+    assert capsys.readouterr().err == "error: sub.json: invalid submission: results.a\\nb.parts: unknown object\n"
+    print_problems("sub.json", [Problem("a", "x"), Problem("b", "y")])
+    assert capsys.readouterr().err.splitlines() == [
+        "error: sub.json: invalid submission: 2 problems found", "  - a: x", "  - b: y"]
