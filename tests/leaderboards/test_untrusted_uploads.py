@@ -197,3 +197,38 @@ def test_orphaned_worker_does_not_score_the_job_twice(one_object, gt_sub, tmp_pa
         srv.kill()
         if srv2 is not None:
             srv2.kill()
+
+
+def test_concurrent_unpacking_is_capped(one_object, gt_sub, tmp_path, monkeypatch):
+    """Six uploads at once, ``max_unpacking=2``: never more than two archives inflate at the same time (the
+    real extractor, timed by a wrapper that counts how many run at once), and every upload is still queued."""
+    import threading
+    from concurrent.futures import ThreadPoolExecutor
+
+    from fastapi.testclient import TestClient
+
+    import leaderboards.server as S
+
+    active, peak, lock = [0], [0], threading.Lock()
+    real = S.extract_zip
+
+    def counted(*a, **k):
+        with lock:
+            active[0] += 1
+            peak[0] = max(peak[0], active[0])
+        try:
+            time.sleep(0.3)  # hold the slot long enough for the others to pile up
+            return real(*a, **k)
+        finally:
+            with lock:
+                active[0] -= 1
+
+    monkeypatch.setattr(S, "extract_zip", counted)
+    cfg = S.ServerConfig(db=str(tmp_path / "lb.db"), data=one_object, work=tmp_path / "work", max_unpacking=2)
+    tok = create_token(open_engine(cfg.db), "team-cap", 100)
+    datas = [zip_folder(gt_sub, method=f"cap-{i}") for i in range(6)]
+    with TestClient(S.create_app(cfg), base_url="http://127.0.0.1") as c, ThreadPoolExecutor(6) as ex:
+        rs = list(ex.map(lambda d: c.post(S.UPLOAD_PATH, headers={"Authorization": f"Bearer {tok}"},
+                                          files={"archive": ("s.zip", d, "application/zip")}), datas))
+    assert [r.status_code for r in rs] == [202] * 6, [r.text for r in rs]
+    assert peak[0] == 2, peak
