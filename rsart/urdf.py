@@ -75,10 +75,40 @@ def _quiet_library_logs():
         for lg, lv in zip(loggers, levels):
             lg.setLevel(lv)
 
-def load_mesh_file(path: Path, scale: np.ndarray | None = None) -> list[trimesh.Trimesh]:
-    """Load a mesh file (OBJ/PLY/STL/GLB/DAE) as a list of trimeshes, textures kept where present."""
+class _InsideResolver(trimesh.resolvers.FilePathResolver):
+    """Resolve a mesh's side files (MTL, texture images) relative to the mesh's folder, but only inside
+    ``root`` (PartNet-Mobility's MTLs say ``map_Kd ../images/texture_0.jpg``: outside the OBJ's folder, inside
+    the object folder; trimesh's own resolver refuses that). Names that cannot be found are kept in ``missing``."""
+
+    def __init__(self, mesh_path: Path, root: Path):
+        super().__init__(str(mesh_path), allow_anywhere=True)
+        self.root = Path(root).resolve()
+        self.missing: list[str] = []
+
+    def get(self, name: str):
+        p = (Path(self.parent) / name.strip()).resolve()
+        if p != self.root and self.root not in p.parents:
+            self.missing.append(name.strip())
+            raise FileNotFoundError(name)
+        if not p.is_file():
+            self.missing.append(name.strip())
+            raise FileNotFoundError(name)
+        return p.read_bytes()
+
+
+def load_mesh_file(path: Path, scale: np.ndarray | None = None, *, root: Path | None = None,
+                   missing: list[str] | None = None) -> list[trimesh.Trimesh]:
+    """Load a mesh file (OBJ/PLY/STL/GLB/DAE) as a list of trimeshes, textures kept where present.
+
+    Side files (MTL, texture images) are looked up relative to the mesh file and only inside ``root``
+    (default: the mesh's folder). The names of texture images its materials reference but that cannot be
+    read (and of material libraries, ``.mtl``) are appended to ``missing`` (when given), so callers can say
+    so instead of rendering untextured.
+    """
+    path = Path(path)
+    resolver = _InsideResolver(path, root if root is not None else path.parent)
     try:
-        loaded = trimesh.load(str(path), process=False)
+        loaded = trimesh.load(str(path), process=False, resolver=resolver)
     except Exception as e:
         raise RsartError(f"{path}: cannot read mesh ({type(e).__name__}: {e})") from None
     if isinstance(loaded, trimesh.Scene):
@@ -90,13 +120,16 @@ def load_mesh_file(path: Path, scale: np.ndarray | None = None) -> list[trimesh.
         raise RsartError(f"{path}: contains no triangle mesh")
     if not any(len(m.faces) for m in meshes):  # e.g. a text file named .obj: trimesh reads it as empty
         raise RsartError(f"{path}: contains no triangles (not a mesh, or an empty one)")
+    if missing is not None:  # material libraries and texture images the file names but we could not read
+        missing.extend(dict.fromkeys(resolver.missing))
     if scale is not None:
         S = np.diag([*np.asarray(scale, dtype=float), 1.0])
         for m in meshes:
             m.apply_transform(S)
     return meshes
 
-def _geometry_meshes(geom, base_dir: Path, source: str, where: str) -> list[trimesh.Trimesh]:
+def _geometry_meshes(geom, base_dir: Path, source: str, where: str,
+                     missing: list[str] | None = None) -> list[trimesh.Trimesh]:
     if geom is None:
         return []
     if geom.box is not None:
@@ -120,7 +153,8 @@ def _geometry_meshes(geom, base_dir: Path, source: str, where: str) -> list[trim
         if not p.is_file():
             raise RsartError(f"{source}: {where}: mesh file {fn!r} not found")
         try:  # an unreadable or empty visual mesh is an error naming the link, never a silently empty part
-            return load_mesh_file(p, geom.mesh.scale if geom.mesh.scale is not None else None)
+            return load_mesh_file(p, geom.mesh.scale if geom.mesh.scale is not None else None,
+                                  root=base_dir.resolve(), missing=missing)
         except RsartError as e:
             raise RsartError(f"{source}: {where}: {e}") from None
     return []
@@ -232,6 +266,7 @@ def read_urdf(path: str | os.PathLike, *, use: str = "visual", load_meshes: bool
             name = f"{name}_{pi}"
         names.add(name)
         visuals: list[trimesh.Trimesh] = []
+        missing: list[str] = []
         if load_meshes:
             for ln in lnames:
                 link = links[ln]
@@ -239,12 +274,15 @@ def read_urdf(path: str | os.PathLike, *, use: str = "visual", load_meshes: bool
                 for k, el in enumerate(elems):
                     where = f"link[{ln}].{'visual' if elems is link.visuals else 'collision'}[{k}]"
                     T = T_link[ln] @ (np.asarray(el.origin, dtype=float) if el.origin is not None else np.eye(4))
-                    for m in _geometry_meshes(el.geometry, path.parent, source, where):
+                    for m in _geometry_meshes(el.geometry, path.parent, source, where, missing):
                         m.apply_transform(T)
                         visuals.append(m)
         geom = (trimesh.util.concatenate([trimesh.Trimesh(m.vertices, m.faces, process=False) for m in visuals])
                 if visuals else trimesh.Trimesh())
-        parts.append(TwinPart(pi, name, geom, visuals, {"links": list(lnames)}))
+        extra = {"links": list(lnames)}
+        if missing:
+            extra["missing_textures"] = sorted(set(missing))
+        parts.append(TwinPart(pi, name, geom, visuals, extra))
 
     joints = []
     for pi in range(1, len(part_links)):
