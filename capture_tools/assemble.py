@@ -25,7 +25,7 @@ import yaml
 
 from rsart.errors import RsartError
 from rsart.format import CamerasFile, State, ViewRecord, write_cameras
-from rsart.io import atomic_dir, write_depth_png, write_json, write_mask_png, write_png_rgb
+from rsart.io import atomic_dir, is_empty_dir, write_depth_png, write_json, write_mask_png, write_png_rgb
 from rsart.kinematics import Twin
 
 from .joint import process_joint
@@ -111,8 +111,8 @@ def assemble(raw_dir: str | Path, twin_path: str | Path, states_yaml: str | Path
         raise RsartError(f"capture log eval_states {eval_states!r}: needs 'start' and 'end' naming logged states "
                          f"({sorted(known)})")
     out = Path(out)
-    if out.exists() and not overwrite:
-        raise RsartError(f"{out}: already exists (pass --overwrite to replace it)")
+    if out.exists() and not overwrite and not is_empty_dir(out):
+        raise RsartError(f"{out}: already exists and is not empty (pass --overwrite to replace it)")
     report: dict = {"format": "rsart-capture/1", "raw": str(raw_dir), "settings": {"n_views": settings.n_views},
                     "states": {}}
     with atomic_dir(out, overwrite=overwrite) as tmp:

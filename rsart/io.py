@@ -84,16 +84,23 @@ def _reject_constant(name: str) -> Any:
     raise ValueError(f"non-finite number {name} is not allowed in JSON")
 
 
+def is_empty_dir(path: str | os.PathLike) -> bool:
+    """True for an existing folder without any entry (not a symlink)."""
+    p = Path(path)
+    return p.is_dir() and not p.is_symlink() and next(p.iterdir(), None) is None
+
+
 @contextlib.contextmanager
 def atomic_dir(path: str | os.PathLike, overwrite: bool = False) -> Iterator[Path]:
     """Build a folder atomically: yields a temporary sibling folder, renamed to ``path`` on success.
 
-    On an exception the temporary folder is removed and ``path`` is untouched. With
-    ``overwrite`` an existing ``path`` is replaced only after the new folder is complete.
+    On an exception the temporary folder is removed and ``path`` is untouched. An existing *empty*
+    folder is accepted (users often create the output folder first); anything else that exists
+    needs ``overwrite``, and is replaced only after the new folder is complete.
     """
     path = Path(path)
-    if path.exists() and not overwrite:
-        raise RsartError(f"{path}: already exists (pass overwrite to replace it)")
+    if path.exists() and not overwrite and not is_empty_dir(path):
+        raise RsartError(f"{path}: already exists and is not empty (pass overwrite to replace it)")
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".partial", dir=path.parent))
     try:

@@ -11,6 +11,7 @@ import re
 from pathlib import Path
 
 from ..errors import RsartError
+from ..io import is_empty_dir
 from ..usd import read_usd
 
 USD_SUFFIXES = (".usd", ".usda", ".usdc", ".usdz")
@@ -40,8 +41,8 @@ def convert_usd(src: str | Path, out: str | Path, *, object_id: str | None = Non
         raise RsartError(f"object id {oid!r} is not a safe id (letters, digits, '_', '.', '-')")
     if category is not None and not category.strip():
         raise RsartError("category must be a non-empty string")
-    if out.exists() and not overwrite:
-        raise RsartError(f"{out}: already exists (pass overwrite to replace it)")
+    if out.exists() and not overwrite and not is_empty_dir(out):
+        raise RsartError(f"{out}: already exists and is not empty (pass overwrite to replace it)")
     twin = read_usd(src)
     from ..twin_io import write_object
     from ..usd_read import read_usd_units
