@@ -22,6 +22,8 @@ from typing import Any
 from ..errors import RsartError
 
 GROUP = "rsart.adapters"
+#: formats of ``rsart export --to`` (rsart.export.FORMATS; repeated here so --help imports nothing heavy)
+EXPORT_FORMATS = ("nerfstudio", "colmap", "blender")
 
 _CONVENTIONS = """\
 Conventions: rsart objects use metres and radians, a z-up world (the object base frame) and OpenCV
@@ -70,15 +72,30 @@ def register(sub: argparse._SubParsersAction) -> None:
     pl.set_defaults(func=_list)
     p.set_defaults(func=_list)
 
-    pe = sub.add_parser("export", help="write an rsart object in a method's input layout",
-                        description="Export OBJECT (an object folder with the protocol's states rendered) into "
-                                    "the input layout of --method, with that method family's capture protocol "
-                                    "(two-state or single-joint). OUT/README.txt gives the commands to run in "
-                                    "the method's repository.\n\n" + _CONVENTIONS,
+    pe = sub.add_parser("export", help="write an rsart object for a training tool (--to) or a method (--method)",
+                        description="Export OBJECT (an object folder with rendered states).\n\n"
+                                    "--to nerfstudio|colmap|blender: the inputs NeRF / Gaussian-splatting code "
+                                    "reads, one folder OUT/<state>/ per state (--state ID, repeatable, or "
+                                    "--all-states = every captured state, the default): nerfstudio "
+                                    "transforms.json with train/val/test file lists and binary masks; a COLMAP "
+                                    "model sparse/0 (PINHOLE camera, points from back-projected depth) with "
+                                    "images/ (training views only; test views in test/); Blender "
+                                    "transforms_{train,val,test}.json (OpenGL camera axes, camera_angle_x). "
+                                    "Test views are never in a training list. Docs: docs/export.md.\n\n"
+                                    "--method NAME: the input layout of a baseline method (adapter plug-in), with "
+                                    "that method family's capture protocol (two-state or single-joint); "
+                                    "OUT/README.txt gives the commands to run in the method's repository. "
+                                    "--method nerfstudio|colmap|blender means --to.\n\n" + _CONVENTIONS,
                         formatter_class=argparse.RawDescriptionHelpFormatter)
     pe.add_argument("object", type=Path, help="object folder (meta.json + rendered states)")
-    pe.add_argument("--method", required=True, help="adapter name (see `rsart adapters list`)")
-    pe.add_argument("--out", type=Path, required=True, help="output folder (created atomically)")
+    how = pe.add_mutually_exclusive_group(required=True)
+    how.add_argument("--to", choices=EXPORT_FORMATS, help="training-tool format (see above)")
+    how.add_argument("--method", help="adapter name (see `rsart adapters list`)")
+    which = pe.add_mutually_exclusive_group()
+    which.add_argument("--state", action="append", metavar="ID", help="state to export (repeatable; with --to)")
+    which.add_argument("--all-states", action="store_true", help="every captured state (default; with --to)")
+    pe.add_argument("--out", type=Path, required=True,
+                    help="output folder (created atomically; an existing empty folder is fine)")
     pe.add_argument("--frame", default="z-up", choices=("z-up", "paris", "y-up"),
                     help="method world frame: z-up = rsart's world (default); paris = the peers' z-up GT frame of "
                          "PartNet-Mobility objects; y-up = PartNet's y-up annotation frame")
@@ -117,10 +134,35 @@ def _list(args) -> int:
 
 
 def _export(args) -> int:
+    fmt = args.to or (args.method if args.method in EXPORT_FORMATS else None)
+    if fmt is not None:
+        return _export_format(args, fmt)
+    if args.state or args.all_states:
+        raise RsartError("--state/--all-states apply to --to nerfstudio|colmap|blender; an adapter (--method) "
+                         "exports the states of its own capture protocol")
     ad = get(args.method)
     rep = ad.export(args.object, args.out, frame=args.frame, overwrite=args.overwrite)
     print(rep.summary() if hasattr(rep, "summary") else rep)
     print(f"next: the commands in {args.out / 'README.txt'}")
+    return 0
+
+
+def _export_format(args, fmt: str) -> int:
+    from ..dataset import RSArtObject, load
+    from ..export import export
+
+    if args.frame != "z-up":
+        raise RsartError(f"--frame {args.frame} applies to adapters (--method); --to {fmt} exports in rsart's world frame")
+    obj = load(args.object)
+    if not isinstance(obj, RSArtObject):
+        raise RsartError(f"{args.object}: a dataset root; export one object folder of it (e.g. {args.object}/<id>)")
+    written = export(obj, fmt, args.out, states=args.state, overwrite=args.overwrite)
+    for w in written:
+        print(f"{fmt}: {w}")
+    hint = {"nerfstudio": "ns-train splatfacto --data {d} nerfstudio-data",
+            "colmap": "python train.py -s {d}   (3D Gaussian Splatting; test views: {d}/test)",
+            "blender": "python train.py -s {d}   (3D Gaussian Splatting, Blender/NeRF-synthetic reader)"}[fmt]
+    print("next: " + hint.format(d=written[0].parent if fmt != "colmap" else written[0].parent.parent))
     return 0
 
 
