@@ -30,7 +30,7 @@ import numpy as np
 from .camera import Camera
 from .errors import RsartError
 from .format import CamerasFile, DatasetIndex, ObjectMeta, State, read_cameras, read_index, read_meta
-from .io import check_inside, read_depth_png, read_mask_png, read_png_rgb, write_json
+from .io import check_inside, read_depth_png, read_mask_png, read_png_rgb
 
 
 @dataclass
@@ -165,6 +165,31 @@ class RSArtObject:
         return (f"RSArtObject({self.id!r}, category={self.category!r}, parts={len(self.parts)}, "
                 f"joints={len(self.joints)}, states={list(self.states)})")
 
+    def torch_views(self, states: list[str] | None = None, split: str = "train") -> list[tuple[int, str, "View"]]:
+        """(state position, state id, view) of every view of ``states`` (default: captured states) in ``split``.
+
+        Raises RsartError naming what exists when a state is unknown or not captured, or when ``split``
+        selects no view of a state (instead of an empty dataset that trains on nothing)."""
+        if not states:
+            states = self.captured_states
+            if not states:
+                raise RsartError(f"{self.path}: no state has captured views (states: {', '.join(self.states)}; "
+                                 "render some with `rsart render`)")
+        views = []
+        for k, sid in enumerate(states):
+            if sid not in self.states:
+                raise RsartError(f"{self.path}: no state {sid!r} (states: {', '.join(self.states)})")
+            st = self.states[sid]
+            if not st.captured:
+                raise RsartError(f"{self.path}: state {sid!r} has no images (captured states: "
+                                 f"{', '.join(self.captured_states) or 'none'})")
+            sel = st.split(split)
+            if not sel:
+                have = sorted({v.split for v in st.views})
+                raise RsartError(f"{self.path}: state {sid!r} has no {split!r} views (splits: {', '.join(have)})")
+            views += [(k, sid, v) for v in sel]
+        return views
+
     def torch_dataset(self, states: list[str] | None = None, split: str = "train", size: tuple[int, int] | None = None,
                       with_depth: bool = True, with_mask: bool = True):
         """A ``torch.utils.data.Dataset`` over the views of ``states`` (default: captured states) in ``split``.
@@ -172,47 +197,23 @@ class RSArtObject:
         Items: dict with ``image`` (H, W, 3) float32 in [0, 1], ``depth`` (H, W) float32 m, ``mask`` (H, W)
         int64, ``K`` (3, 3) float32, ``c2w`` (4, 4) float32 (OpenCV), ``state_index`` int64 (position in
         ``states``), ``state_id`` and ``view_id`` strings. ``size`` = (width, height) resamples images and K.
+        Raises RsartError for an unknown state, a state without images or a split without views.
         """
         from .torch_data import ViewDataset
 
-        states = states or self.captured_states
-        views = []
-        for k, sid in enumerate(states):
-            if sid not in self.states:
-                raise KeyError(f"{self.id}: no state {sid!r} (states: {list(self.states)})")
-            views += [(k, sid, v) for v in self.states[sid].split(split)]
-        return ViewDataset(views, size=size, with_depth=with_depth, with_mask=with_mask)
+        return ViewDataset(self.torch_views(states, split), size=size, with_depth=with_depth, with_mask=with_mask)
 
-    def export_nerfstudio(self, out_dir: str | os.PathLike, states: list[str] | None = None) -> list[Path]:
-        """Write ``<out_dir>/<state>/transforms.json`` per captured state (nerfstudio's format).
+    def export(self, to: str, out_dir: str | os.PathLike, states: list[str] | None = None,
+               overwrite: bool = False) -> list[Path]:
+        """Export for training tools: ``to`` = "nerfstudio" | "colmap" | "blender" (see :mod:`rsart.export`)."""
+        from .export import export
 
-        Poses are converted to OpenGL camera-to-world; ``cx, cy`` are shifted by +0.5 because nerfstudio puts
-        pixel centres at (i + 0.5). Image paths point (relatively) at this object's files; nothing is copied.
-        """
-        out_dir = Path(out_dir)
-        written = []
-        for sid in states or self.captured_states:
-            st = self.states[sid]
-            c = st.cameras
-            sdir = out_dir / sid
-            sdir.mkdir(parents=True, exist_ok=True)
-            K = c.intrinsics
-            frames = []
-            for v in st.views:
-                rel = lambda kind: os.path.relpath(v.path(kind), sdir)  # noqa: E731
-                fr = {"file_path": rel("rgb"), "transform_matrix": v.camera.c2w_opengl().tolist(), "split": v.split}
-                if v.has_depth:
-                    fr["depth_file_path"] = rel("depth")
-                if v.has_mask:
-                    fr["mask_path"] = rel("mask")
-                frames.append(fr)
-            tf = {"camera_model": "OPENCV", "fl_x": K.fx, "fl_y": K.fy, "cx": K.cx + 0.5, "cy": K.cy + 0.5,
-                  "w": K.width, "h": K.height, "k1": 0.0, "k2": 0.0, "p1": 0.0, "p2": 0.0,
-                  "depth_unit_scale_factor": c.depth_scale, "frames": frames,
-                  "rsart": {"object_id": self.id, "state": sid, "values": st.values}}
-            write_json(sdir / "transforms.json", tf)
-            written.append(sdir / "transforms.json")
-        return written
+        return export(self, to, out_dir, states=states, overwrite=overwrite)
+
+    def export_nerfstudio(self, out_dir: str | os.PathLike, states: list[str] | None = None,
+                          overwrite: bool = False) -> list[Path]:
+        """``<out_dir>/<state>/transforms.json`` per state (nerfstudio); same as ``export("nerfstudio", ...)``."""
+        return self.export("nerfstudio", out_dir, states, overwrite)
 
 
 class Dataset(Mapping[str, RSArtObject]):
@@ -246,17 +247,60 @@ class Dataset(Mapping[str, RSArtObject]):
             raise KeyError(f"{self.root}: no split {name!r} (splits: {list(self.index.splits)})")
         return [self[i] for i in self.index.splits[name]]
 
+    def torch_dataset(self, objects: list[str] | str | None = None, states: list[str] | None = None,
+                      split: str = "train", size: tuple[int, int] | None = None, with_depth: bool = True,
+                      with_mask: bool = True):
+        """One ``torch.utils.data.Dataset`` over the views of many objects (feed-forward training).
+
+        ``objects``: object ids, or the name of a dataset split (``index.json`` splits), default every
+        object. ``states``: state ids taken from each object (default: each object's captured states).
+        Items are :meth:`RSArtObject.torch_dataset`'s plus ``object_id`` (str) and ``object_index`` (int64,
+        position in the object list). Images of different objects may differ in size: pass ``size`` =
+        (width, height) to batch them. Raises RsartError naming what exists for an unknown object or split,
+        and for an object without such states or views.
+        """
+        from .torch_data import ViewDataset
+
+        if objects is None:
+            ids = list(self.index.objects)
+        elif isinstance(objects, str):
+            if objects not in self.index.splits:
+                raise RsartError(f"{self.root}: no split {objects!r} (splits: {', '.join(self.index.splits)})")
+            ids = list(self.index.splits[objects])
+        else:
+            ids = list(objects)
+        unknown = [i for i in ids if i not in self.index.objects]
+        if unknown:
+            raise RsartError(f"{self.root}: no object(s) {unknown} (objects: {', '.join(self.index.objects)})")
+        views = []
+        for n, oid in enumerate(ids):
+            views += [(k, sid, v, oid, n) for k, sid, v in self[oid].torch_views(states, split)]
+        return ViewDataset(views, size=size, with_depth=with_depth, with_mask=with_mask)
+
     def __repr__(self) -> str:
         return f"Dataset({self.name!r} v{self.version}, {len(self)} objects, splits={list(self.splits)})"
 
 
-def load(path: str | os.PathLike) -> Dataset | RSArtObject:
-    """Open a dataset root (folder with ``index.json``) or one object folder (with ``meta.json``)."""
+def load(path: str | os.PathLike, cache: str | os.PathLike | None = None) -> Dataset | RSArtObject:
+    """Open a dataset root (folder with ``index.json``) or one object folder (with ``meta.json``).
+
+    Raw sources load too: a PartNet-Mobility object folder (``mobility.urdf``), a ``.urdf`` or a USD
+    file is converted once (as ``rsart convert`` does) into the cache folder ``cache`` (default
+    ``$RSART_CACHE``, else ``~/.cache/rsart``) and loaded from there; the cache is keyed by the source's
+    content, so an edited source is converted again. See :mod:`rsart.sources.cache`.
+    """
     path = Path(path)
     if (path / "index.json").is_file():
         return Dataset(path)
-    if (path / "meta.json").is_file():
+    if (path / "meta.json").is_file() and not (path / "mobility.urdf").is_file():
         return RSArtObject(path)
-    if path.name == "meta.json" and path.is_file():
+    if path.name == "meta.json" and path.is_file() and not (path.parent / "mobility.urdf").is_file():
         return RSArtObject(path.parent)
-    raise RsartError(f"{path}: neither a dataset root (index.json) nor an object folder (meta.json)")
+    from .sources.cache import cached_object, source_kind
+
+    if source_kind(path) is not None:
+        return RSArtObject(cached_object(path, cache))
+    if not path.exists():
+        raise RsartError(f"{path}: no such file or folder")
+    raise RsartError(f"{path}: neither a dataset root (index.json), an object folder (meta.json), a "
+                     "PartNet-Mobility folder (mobility.urdf), a .urdf nor a USD file")

@@ -14,7 +14,7 @@ class ViewDataset(_TorchDataset):
     """Views as dicts of tensors; see :meth:`rsart.dataset.RSArtObject.torch_dataset` for keys, shapes and units."""
 
     def __init__(self, views, size: tuple[int, int] | None = None, with_depth: bool = True, with_mask: bool = True):
-        self.views = views  # list of (state_index, state_id, View)
+        self.views = views  # list of (state_index, state_id, View[, object_id, object_index])
         self.size = size
         self.with_depth = with_depth
         self.with_mask = with_mask
@@ -25,7 +25,7 @@ class ViewDataset(_TorchDataset):
     def __getitem__(self, i: int) -> dict:
         import cv2
 
-        k, sid, v = self.views[i]
+        k, sid, v, *obj = self.views[i]
         cam = v.camera
         rgb = v.rgb
         depth = v.depth if self.with_depth and v.has_depth else None
@@ -42,6 +42,8 @@ class ViewDataset(_TorchDataset):
                 "K": torch.from_numpy(cam.K.astype(np.float32)),
                 "c2w": torch.from_numpy(cam.c2w.astype(np.float32)),
                 "state_index": torch.tensor(k, dtype=torch.int64), "state_id": sid, "view_id": v.id}
+        if obj:
+            item["object_id"], item["object_index"] = obj[0], torch.tensor(obj[1], dtype=torch.int64)
         if depth is not None:
             item["depth"] = torch.from_numpy(depth.astype(np.float32))
         if mask is not None:

@@ -70,6 +70,8 @@ def write_object(twin: Twin, out_dir: str | os.PathLike, *, object_id: str, cate
         states, ev = protocol_states(twin.joints)
         eval_states = eval_states or ev
     parts = twin.to_parts(PARTS_DIR)
+    # kept inside the URDF and USD so that converting either back keeps the object's identity
+    info = {"object_id": object_id, "category": category, "units": units, "source": dict(source)}
     with atomic_dir(out_dir, overwrite=overwrite) as tmp:
         (tmp / PARTS_DIR).mkdir(parents=True)
         (tmp / VISUAL_DIR).mkdir(parents=True)
@@ -81,7 +83,7 @@ def write_object(twin: Twin, out_dir: str | os.PathLike, *, object_id: str, cate
             if vf is not None:
                 visual_files[p.index] = vf
                 rec.extra["visual"] = f"{VISUAL_DIR}/{vf}"
-        write_urdf(twin, tmp / URDF_PATH, visual_files, mesh_dir="visual")
+        write_urdf(twin, tmp / URDF_PATH, visual_files, mesh_dir="visual", object_info=info)
         twin_files = {"urdf": URDF_PATH}
         if write_usd:
             from .extras import has
@@ -89,7 +91,7 @@ def write_object(twin: Twin, out_dir: str | os.PathLike, *, object_id: str, cate
             if has("usd"):  # without the [usd] extra the URDF alone describes the twin (docs/procedural.md)
                 from . import usd
 
-                usd.write_usd(twin, tmp / USD_PATH, units=units)
+                usd.write_usd(twin, tmp / USD_PATH, units=units, object_info=info)
                 twin_files["usd"] = USD_PATH
         meta = ObjectMeta(object_id=object_id, category=category, source=dict(source), units=units,
                           twin=twin_files, parts=parts, joints=list(twin.joints), states=list(states),

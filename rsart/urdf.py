@@ -17,11 +17,13 @@ from __future__ import annotations
 
 import contextlib
 import io
+import json
 import logging
 import math
 import os
 import re
 from pathlib import Path
+from typing import Any
 from xml.sax.saxutils import quoteattr
 
 import numpy as np
@@ -306,14 +308,19 @@ def _v(a) -> str:
     return " ".join(_f(x) for x in a)
 
 def urdf_text(twin: Twin, visual_files: dict[int, str], mesh_dir: str = "visual",
-              masses: dict[int, float] | None = None) -> str:
-    """URDF XML of ``twin``; ``visual_files[part]`` is each part's mesh file name inside ``mesh_dir``."""
+              masses: dict[int, float] | None = None, object_info: dict | None = None) -> str:
+    """URDF XML of ``twin``; ``visual_files[part]`` is each part's mesh file name inside ``mesh_dir``.
+
+    ``object_info`` (object_id, category, units, source) is kept in an ``<rsart>`` element (ignored by
+    other URDF readers) so that converting the URDF back keeps them (:func:`read_urdf_object_info`)."""
     frame = {0: np.zeros(3)}
     for j in twin.joints:
         frame[j.child] = np.asarray(j.origin, dtype=float)
     lines = ['<?xml version="1.0"?>', f"<robot name={quoteattr(twin.name)}>",
              "  <mujoco>", f'    <compiler discardvisual="false" fusestatic="false" '
              'balanceinertia="true"/>', "  </mujoco>"]
+    if object_info:
+        lines.append(f"  <rsart info={quoteattr(json.dumps(object_info, sort_keys=True))}/>")
     for p in twin.parts:
         o = -frame[p.index]
         m = p.mesh
@@ -341,7 +348,39 @@ def urdf_text(twin: Twin, visual_files: dict[int, str], mesh_dir: str = "visual"
     lines.append("</robot>")
     return "\n".join(lines) + "\n"
 
-def write_urdf(twin: Twin, path: str | os.PathLike, visual_files: dict[int, str], mesh_dir: str = "visual") -> None:
+def write_urdf(twin: Twin, path: str | os.PathLike, visual_files: dict[int, str], mesh_dir: str = "visual",
+               object_info: dict | None = None) -> None:
     """Write ``twin`` as URDF at ``path`` (atomically); meshes are expected in ``<dir of path>/<mesh_dir>/``."""
-    atomic_write_text(path, urdf_text(twin, visual_files, mesh_dir))
+    atomic_write_text(path, urdf_text(twin, visual_files, mesh_dir, object_info=object_info))
+
+
+def parse_object_info(text: Any) -> dict:
+    """The object info rsart stored in a twin file (JSON text): only well-formed keys are kept, {} otherwise."""
+    try:
+        d = json.loads(text) if isinstance(text, str) else None
+    except ValueError:
+        return {}
+    if not isinstance(d, dict):
+        return {}
+    out: dict = {}
+    for k in ("object_id", "category", "units"):
+        if isinstance(d.get(k), str) and d[k].strip() and len(d[k]) <= 200:
+            out[k] = d[k]
+    if "object_id" in out and not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9_.\-]{0,127}", out["object_id"]):
+        del out["object_id"]  # not a safe id: the caller falls back to its default
+    if isinstance(d.get("source"), dict) and isinstance(d["source"].get("kind"), str):
+        out["source"] = d["source"]
+    return out
+
+
+def read_urdf_object_info(path: str | os.PathLike) -> dict:
+    """object_id / category / units / source that rsart stored in a URDF's ``<rsart info=...>`` ({} if none)."""
+    import defusedxml.ElementTree as DET
+
+    try:
+        root = DET.fromstring(Path(path).read_bytes(), forbid_dtd=True)
+    except Exception:  # read_urdf reports bad files; here a missing record is just {}
+        return {}
+    el = root.find("rsart")
+    return parse_object_info(el.get("info")) if el is not None else {}
 

@@ -87,18 +87,19 @@ def custom_attr(prim, name: str):
 
 
 def write_usd(twin: Twin, path: str | Path, *, units: str = "m",
-              texture_files: dict[int, list[str]] | None = None) -> None:
+              texture_files: dict[int, list[str]] | None = None, object_info: dict | None = None) -> None:
     """Write ``twin`` as a UsdPhysics articulation in a ``.usda`` file, atomically.
 
     ``units``: "m" or "scene" (both written with ``metersPerUnit`` 1; recorded in the layer's
     ``customLayerData["rsart:units"]``). ``texture_files``: optional part index -> one texture file
     per visual of that part, relative to the ``.usda``'s folder (absolute paths are made relative);
     textured visuals without an entry get their image written to ``textures/<part>_<k>.png``
-    beside the ``.usda``.
+    beside the ``.usda``. ``object_info`` (object_id, category, units, source) is kept as JSON in
+    ``customLayerData["rsart:object"]`` so converting the file back keeps them.
     """
     from .usd_write import write_usd as _write
 
-    _write(twin, path, units=units, texture_files=texture_files)
+    _write(twin, path, units=units, texture_files=texture_files, object_info=object_info)
 
 
 def read_usd(path: str | Path) -> Twin:

@@ -516,3 +516,16 @@ def read_usd(path: str | Path) -> Twin:
     except Exception as e:  # hostile input must never surface as a traceback
         raise RsartError(f"{path}: cannot read the USD articulation ({type(e).__name__}: {e})") from None
 
+
+
+def read_usd_object_info(path: str | Path) -> dict:
+    """object_id / category / units / source rsart stored in ``customLayerData["rsart:object"]`` ({} if none)."""
+    from pxr import Tf
+
+    from .urdf import parse_object_info
+
+    try:
+        layer = _fresh_layer(str(path))
+    except Tf.ErrorException:
+        return {}
+    return parse_object_info(layer.customLayerData.get("rsart:object")) if layer is not None else {}

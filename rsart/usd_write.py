@@ -275,12 +275,18 @@ def build_stage(twin: Twin, usd_dir: Path, units: str = "m", texture_files: dict
     return stage, pending
 
 
-def write_usd(twin: Twin, path: str | Path, *, units: str = "m", texture_files: dict | None = None) -> None:
+def write_usd(twin: Twin, path: str | Path, *, units: str = "m", texture_files: dict | None = None,
+              object_info: dict | None = None) -> None:
     """See :func:`rsart.usd.write_usd`. Texture PNGs first, then the ``.usda`` (each atomically)."""
+    import json
+
     path = Path(path)
     if path.suffix != ".usda":
         raise RsartError(f"{path}: rsart writes USD as text; use a .usda file name")
     stage, pending = build_stage(twin, path.parent.absolute(), units, texture_files)
+    if object_info:
+        layer = stage.GetRootLayer()
+        layer.customLayerData = {**layer.customLayerData, "rsart:object": json.dumps(object_info, sort_keys=True)}
     text = stage.GetRootLayer().ExportToString()
     for p, data in pending.items():
         atomic_write_bytes(p, data)

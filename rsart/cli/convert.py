@@ -51,7 +51,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     u.add_argument("--out", type=Path, required=True, metavar="DIR")
     u.add_argument("--object-id")
     u.add_argument("--category", default=None)
-    u.add_argument("--units", choices=["m", "scene"], default="m", help="what the URDF's numbers are (default m)")
+    u.add_argument("--units", choices=["m", "scene"], default=None,
+                   help="what the URDF's numbers are (default m, or what rsart recorded in its own URDFs)")
     u.add_argument("--scale", type=float, metavar="S", help="multiply geometry by S (result in metres)")
     _common(u)
     u.set_defaults(func=_urdf)
@@ -64,6 +65,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--object-id")
     s.add_argument("--category", default=None)
     s.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
+    _verbosity(s)
     s.set_defaults(func=_usd)
     p.set_defaults(func=lambda a: (p.print_help(), 2)[1])
 
@@ -72,7 +74,15 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
     p.add_argument("--resolution", type=int, default=None, metavar="N",
                    help="watertight remesh grid cells across the object's diagonal (default 384)")
-    p.add_argument("-q", "--quiet", action="store_true", help="print only the result")
+    _verbosity(p)
+
+
+def _verbosity(p: argparse.ArgumentParser) -> None:
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("-q", "--quiet", action="store_true",
+                   help="no progress bar: print only one summary line per object (and errors)")
+    g.add_argument("-v", "--verbose", action="store_true",
+                   help="also print how each part's watertight copy was made")
 
 
 def _watertight(args):
@@ -91,7 +101,35 @@ def _positive(value: float | None, option: str) -> None:
 
 
 def _log(args):
-    return None if args.quiet else (lambda msg: print(msg, file=sys.stderr))
+    return (lambda msg: print(msg, file=sys.stderr)) if getattr(args, "verbose", False) else None
+
+
+class PartProgress:
+    """A tqdm progress bar over one object's parts (stderr, only on a terminal; none with -q or -v).
+
+    Call it as ``progress(done, total, part_name)``; ``close()`` when the object is finished."""
+
+    def __init__(self, desc: str, enabled: bool = True):
+        self.desc, self.enabled, self.bar = desc, enabled, None
+
+    def __call__(self, done: int, total: int, name: str) -> None:
+        if not self.enabled:
+            return
+        if self.bar is None:
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=total, desc=self.desc, unit="part", file=sys.stderr, leave=False, disable=None)
+        self.bar.set_postfix_str(name, refresh=False)
+        self.bar.update(done - self.bar.n)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+            self.bar = None
+
+
+def _progress(args, desc: str) -> PartProgress:
+    return PartProgress(desc, enabled=not (args.quiet or getattr(args, "verbose", False)))
 
 
 def _summary(meta, out: Path) -> str:
@@ -108,8 +146,13 @@ def _partnet(args) -> int:
             raise RsartError("--ids/--split need --root PM_ROOT (and no PM_OBJECT_DIR)")
         if args.obj_dir is None:
             raise RsartError("give PM_OBJECT_DIR, or --root PM_ROOT with --ids or --split")
-        meta = convert_partnet(args.obj_dir, args.out, object_id=args.object_id, metric_scale=args.metric_scale,
-                               overwrite=args.overwrite, watertight=_watertight(args), log=_log(args))
+        bar = _progress(args, args.obj_dir.name)
+        try:
+            meta = convert_partnet(args.obj_dir, args.out, object_id=args.object_id,
+                                   metric_scale=args.metric_scale, overwrite=args.overwrite,
+                                   watertight=_watertight(args), log=_log(args), progress=bar)
+        finally:
+            bar.close()
         print(_summary(meta, args.out))
         return 0
     if args.obj_dir is not None:
@@ -124,14 +167,22 @@ def _partnet(args) -> int:
         raise RsartError("--root needs --ids ID,ID,... or --split NAME")
     if not ids:
         raise RsartError("--ids lists no id")
+    from tqdm import tqdm
+
+    def done(i: str, status: str, detail) -> None:  # one summary line per object, as it finishes
+        if status == "converted":
+            line = _summary(detail, args.out / detail.object_id)
+        elif status == "kept":
+            line = f"{args.out / f'pm-{i}'}: exists, kept (pass --overwrite to redo it)"
+        else:
+            line = f"{i}: {status}" + (f": {detail}" if detail else "")
+        tqdm.write(line, file=sys.stdout if status in ("converted", "kept") else sys.stderr)
+
     rep = convert_partnet_root(args.root, args.out, ids, split=args.split, metric_scale=args.metric_scale,
-                               overwrite=args.overwrite, watertight=_watertight(args), log=_log(args))
-    print(f"{args.out}: converted {len(rep.converted)}/{len(ids)}: {rep.converted}"
-          + (f"; kept existing: {rep.skipped}" if rep.skipped else ""))
-    if rep.missing:
-        print(f"missing from {args.root}: {rep.missing}", file=sys.stderr)
-    for i, msg in rep.failed.items():
-        print(f"failed {i}: {msg}", file=sys.stderr)
+                               overwrite=args.overwrite, watertight=_watertight(args), log=_log(args),
+                               progress_for=lambda i: _progress(args, i), on_done=done)
+    print(f"{args.out}: converted {len(rep.converted)}/{len(ids)}, kept {len(rep.skipped)}, "
+          f"missing {len(rep.missing)}, failed {len(rep.failed)}")
     return 2 if rep.failed or not (rep.converted or rep.skipped) else 0
 
 
@@ -141,8 +192,13 @@ def _urdf(args) -> int:
     _positive(args.scale, "--scale")
     if args.scale is not None and args.units == "scene":
         raise RsartError("--scale converts to metres; do not combine it with --units scene")
-    meta = convert_urdf(args.file, args.out, object_id=args.object_id, category=args.category, units=args.units,
-                        scale=args.scale, overwrite=args.overwrite, watertight=_watertight(args), log=_log(args))
+    bar = _progress(args, args.file.name)
+    try:
+        meta = convert_urdf(args.file, args.out, object_id=args.object_id, category=args.category,
+                            units=args.units, scale=args.scale, overwrite=args.overwrite,
+                            watertight=_watertight(args), log=_log(args), progress=bar)
+    finally:
+        bar.close()
     print(_summary(meta, args.out))
     return 0
 

@@ -280,7 +280,8 @@ def convert_partnet(obj_dir: str | os.PathLike, out: str | os.PathLike, *, objec
                     metric_scale: float | None = None, overwrite: bool = False,
                     watertight: WatertightConfig = WatertightConfig(),
                     unlimited_range: tuple[float, float] = QUARTER_TURN,
-                    log: Callable[[str], None] | None = None) -> ObjectMeta:
+                    log: Callable[[str], None] | None = None,
+                    progress: Callable[[int, int, str], None] | None = None) -> ObjectMeta:
     """Convert one PartNet-Mobility object folder into an RS-Art object folder ``out`` (atomically).
 
     ``object_id`` defaults to ``pm-<folder id>``. ``metric_scale``: metres per PartNet unit (then
@@ -300,8 +301,8 @@ def convert_partnet(obj_dir: str | os.PathLike, out: str | os.PathLike, *, objec
         twin = scale_twin(twin, metric_scale)
         units = "m"
         extra["scale_to_metres"] = float(metric_scale)
-    twin = with_watertight_meshes(twin, watertight, log)
-    extra.update(conversion_notes(twin, notes, unlimited_range))
+    twin = with_watertight_meshes(twin, watertight, log, progress)
+    extra.update(conversion_notes(twin, notes, unlimited_range, source=str(obj_dir)))
     states, ev = protocol_states(twin.joints, unlimited_range=unlimited_range)
     source = {"kind": "partnet-mobility", "id": info.folder_id, "anno_id": info.anno_id,
               "model_id": info.model_id, "version": info.version}
@@ -338,34 +339,53 @@ class BatchReport:
 def convert_partnet_root(root: str | os.PathLike, out_root: str | os.PathLike, ids: list[str], *,
                          split: str | None = None, metric_scale: float | None = None, overwrite: bool = False,
                          watertight: WatertightConfig = WatertightConfig(),
-                         log: Callable[[str], None] | None = None) -> BatchReport:
+                         log: Callable[[str], None] | None = None,
+                         progress_for: Callable[[str], Any] | None = None,
+                         on_done: Callable[[str, str, Any], None] | None = None) -> BatchReport:
     """Convert ``root/<id>`` for each id into ``out_root/pm-<id>``; missing ids and failures are reported,
     not fatal. An existing ``pm-<id>`` object folder is kept (``skipped``) unless ``overwrite``, so an
     interrupted batch can be re-run. ``out_root/index.json`` lists the objects (merged with an existing
-    index) and ``split``."""
+    index) and ``split``.
+
+    ``progress_for(id)`` may return a per-object progress callback (see :func:`convert_partnet`; its
+    ``close()`` is called when the object is done); ``on_done(id, status, detail)`` is called per id with
+    status "converted" (detail: the ObjectMeta), "kept", "missing" or "failed" (detail: the message)."""
     root, out_root = Path(root), Path(out_root)
     if not root.is_dir():
         raise RsartError(f"{root}: not a folder")
     rep = BatchReport()
+    def done(i: str, status: str, detail: Any = None) -> None:
+        if on_done:
+            on_done(i, status, detail)
+
     for i in ids:
         if not _SAFE.match(i) or not (root / i).is_dir():
             rep.missing.append(i)
+            done(i, "missing", f"not in {root}")
             continue
         if not overwrite and (out_root / f"pm-{i}" / "meta.json").is_file():
             rep.skipped.append(f"pm-{i}")
             if log:
                 log(f"{i}: {out_root / f'pm-{i}'} exists, kept (pass overwrite to redo it)")
+            done(i, "kept")
             continue
+        bar = progress_for(i) if progress_for else None
         try:
             meta = convert_partnet(root / i, out_root / f"pm-{i}", metric_scale=metric_scale, overwrite=overwrite,
-                                   watertight=watertight, log=log)
-            rep.converted.append(meta.object_id)
-            if log:
-                log(f"{i}: converted to {out_root / meta.object_id}")
+                                   watertight=watertight, log=log, progress=bar)
         except RsartError as e:
             rep.failed[i] = str(e)
             if log:
                 log(f"{i}: FAILED: {e}")
+            done(i, "failed", str(e))
+        else:
+            rep.converted.append(meta.object_id)
+            if log:
+                log(f"{i}: converted to {out_root / meta.object_id}")
+            done(i, "converted", meta)
+        finally:
+            if bar is not None and hasattr(bar, "close"):
+                bar.close()
     if rep.converted or rep.skipped:
         _update_index(out_root, rep.converted + rep.skipped, split)
     return rep

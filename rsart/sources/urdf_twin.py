@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import math
 import os
+import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -35,6 +36,10 @@ import trimesh
 from ..errors import RsartError
 from ..format import Joint, ObjectMeta
 from ..kinematics import Twin, TwinPart
+
+class MissingTextureWarning(UserWarning):
+    """A mesh's material references a texture image that is not there (the surface renders untextured)."""
+
 
 #: two joints are "on one axis line" (a screw) within these tolerances (unit-direction difference, distance)
 COLLINEAR_TOL = 1e-6
@@ -312,10 +317,23 @@ def watertight_copy(mesh: trimesh.Trimesh, pitch: float, cfg: WatertightConfig =
     return out, info
 
 
+def describe_watertight(info: dict[str, Any]) -> str:
+    """One readable line for a part's watertight record (``part.extra["watertight"]``)."""
+    if info.get("method") == "closed-as-is":
+        return f"closed as is, {info.get('faces')} faces"
+    out = f"remeshed (offset {info.get('level', 0):.3g}, grid {info.get('pitch', 0):.3g}), {info.get('faces')} faces"
+    if "chamfer_vs_original" in info:
+        out += f", Chamfer to the original {info['chamfer_vs_original']:.3g} (floor {info.get('chamfer_floor', 0):.3g})"
+    return out + ("" if info.get("watertight", True) else ", NOT watertight")
+
+
 def with_watertight_meshes(twin: Twin, cfg: WatertightConfig = WatertightConfig(),
-                           log=None) -> Twin:
+                           log=None, progress=None) -> Twin:
     """The twin with each part's ``mesh`` replaced by its watertight copy; the original meshes become (or
-    stay) the part's ``visuals``; the copy's record goes to ``part.extra["watertight"]``."""
+    stay) the part's ``visuals``; the copy's record goes to ``part.extra["watertight"]``.
+
+    ``log(msg)`` gets one readable line per part; ``progress(done, total, part_name)`` is called after
+    each part (for a progress bar)."""
     b = np.array([[np.inf] * 3, [-np.inf] * 3])
     for p in twin.parts:
         if len(p.mesh.vertices):
@@ -330,29 +348,35 @@ def with_watertight_meshes(twin: Twin, cfg: WatertightConfig = WatertightConfig(
         except RsartError as e:
             raise RsartError(f"{twin.name}: part {p.name!r}: {e}") from None
         if log:
-            log(f"  part {p.name}: {info}")
+            log(f"  part {p.name}: {describe_watertight(info)}")
         vis = p.visuals or [p.mesh]
         parts.append(TwinPart(p.index, p.name, wt, vis, {**p.extra, "watertight": info}))
+        if progress:
+            progress(len(parts), len(twin.parts), p.name)
     return Twin(twin.name, parts, list(twin.joints))
 
 
 # ----------------------------------------------------------------------------- generic URDF
 def convert_urdf(src: str | os.PathLike, out: str | os.PathLike, *, object_id: str | None = None,
-                 category: str | None = None, units: str = "m", scale: float | None = None,
+                 category: str | None = None, units: str | None = None, scale: float | None = None,
                  overwrite: bool = False, watertight: WatertightConfig = WatertightConfig(),
-                 log=None) -> ObjectMeta:
+                 log=None, progress=None) -> ObjectMeta:
     """Convert any URDF file into an RS-Art object folder at ``out`` (written atomically).
 
     ``units``: what the URDF's numbers are ("m" for ROS-style URDFs, "scene" for unitless ones); with
-    ``scale`` the geometry is multiplied by it and ``units`` becomes "m". ``object_id`` defaults to the
-    safe form of the file stem; ``category`` to "unknown".
+    ``scale`` the geometry is multiplied by it and ``units`` becomes "m". A URDF that rsart wrote
+    (``twin/object.urdf``) keeps its object id, category, units and source (provenance, with
+    ``converted_from`` added); otherwise ``object_id`` defaults to the safe form of the file stem,
+    ``category`` to "unknown", ``units`` to "m".
     """
     from ..states import QUARTER_TURN
     from ..twin_io import write_object
-    from ..urdf import _safe_name, read_urdf
+    from ..urdf import _safe_name, read_urdf, read_urdf_object_info
 
     src = Path(src)
     twin = read_urdf(src)
+    info = read_urdf_object_info(src)
+    units = units or (info.get("units") if info.get("units") in ("m", "scene") else "m")
     twin, notes = fold_helper_parts(twin, str(src))
     check_geometry(twin, str(src))
     extra: dict[str, Any] = {"converted_from": src.name}
@@ -360,16 +384,30 @@ def convert_urdf(src: str | os.PathLike, out: str | os.PathLike, *, object_id: s
         twin = scale_twin(twin, scale)
         extra["scale_to_metres"] = float(scale)
         units = "m"
-    twin = with_watertight_meshes(twin, watertight, log)
-    extra.update(conversion_notes(twin, notes, QUARTER_TURN))
-    return write_object(twin, out, object_id=object_id or _safe_name(src.stem), category=category or "unknown",
-                        source={"kind": "urdf", "id": src.name}, units=units, extra_meta=extra,
-                        overwrite=overwrite)
+    twin = with_watertight_meshes(twin, watertight, log, progress)
+    extra.update(conversion_notes(twin, notes, QUARTER_TURN, source=str(src)))
+    source = ({**info["source"], "converted_from": {"kind": "urdf", "file": src.name}} if "source" in info
+              else {"kind": "urdf", "id": src.name})
+    return write_object(twin, out, object_id=object_id or info.get("object_id") or _safe_name(src.stem),
+                        category=category or info.get("category") or "unknown", source=source, units=units,
+                        extra_meta=extra, overwrite=overwrite)
 
 
-def conversion_notes(twin: Twin, notes: list[str], unlimited_range: tuple[float, float]) -> dict[str, Any]:
-    """meta.json ``extra`` keys shared by the URDF importers: notes, unlimited joints' state range."""
+def conversion_notes(twin: Twin, notes: list[str], unlimited_range: tuple[float, float],
+                     source: str | None = None) -> dict[str, Any]:
+    """meta.json ``extra`` keys shared by the URDF importers: notes, unlimited joints' state range.
+
+    Texture images that the meshes' materials reference but that could not be read
+    (``part.extra["missing_textures"]``, set by :func:`rsart.urdf.read_urdf`) are warned about once
+    for the whole object (:class:`MissingTextureWarning`) and recorded as a note."""
     out: dict[str, Any] = {}
+    missing = sorted({t for p in twin.parts for t in p.extra.get("missing_textures", [])})
+    if missing:
+        shown = ", ".join(missing[:5]) + (f" and {len(missing) - 5} more" if len(missing) > 5 else "")
+        msg = (f"{len(missing)} texture image(s) referenced by the meshes' materials are missing: {shown}; "
+               "those surfaces are converted and rendered untextured")
+        warnings.warn(f"{source or twin.name}: {msg}", MissingTextureWarning, stacklevel=2)
+        notes = [*notes, msg]
     if notes:
         out["conversion_notes"] = list(notes)
     free = [j.name for j in twin.joints if j.limits is None]

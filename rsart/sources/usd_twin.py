@@ -28,7 +28,9 @@ def convert_usd(src: str | Path, out: str | Path, *, object_id: str | None = Non
                 overwrite: bool = False) -> Path:
     """Read the USD articulation ``src`` and write the object folder ``out``; returns ``out``.
 
-    ``object_id`` defaults to the file stem (made a safe id), ``category`` to "unknown". Units are
+    A USD that rsart wrote keeps its object id, category and source (provenance, with
+    ``converted_from`` added); otherwise ``object_id`` defaults to the file stem (made a safe id),
+    ``category`` to "unknown". Units are
     metres whatever the stage's ``metersPerUnit`` — except a twin rsart wrote from a unitless
     ("scene"-unit) object, which stays "scene". Raises RsartError (naming the prim path) on an
     invalid USD; ``out`` is then left untouched (the folder is built atomically).
@@ -36,7 +38,10 @@ def convert_usd(src: str | Path, out: str | Path, *, object_id: str | None = Non
     src, out = Path(src), Path(out)
     if src.suffix.lower() not in USD_SUFFIXES:
         raise RsartError(f"{src}: not a USD file (expected one of {', '.join(USD_SUFFIXES)})")
-    oid = object_id if object_id is not None else default_object_id(src)
+    from ..usd_read import read_usd_object_info
+
+    info = read_usd_object_info(src) if src.is_file() else {}
+    oid = object_id if object_id is not None else (info.get("object_id") or default_object_id(src))
     if not _SAFE_ID.match(oid):
         raise RsartError(f"object id {oid!r} is not a safe id (letters, digits, '_', '.', '-')")
     if category is not None and not category.strip():
@@ -47,7 +52,8 @@ def convert_usd(src: str | Path, out: str | Path, *, object_id: str | None = Non
     from ..twin_io import write_object
     from ..usd_read import read_usd_units
 
-    write_object(twin, out, object_id=oid, category=category or "unknown",
-                 source={"kind": "usd", "id": src.stem, "file": src.name}, units=read_usd_units(src),
-                 overwrite=overwrite)
+    source = ({**info["source"], "converted_from": {"kind": "usd", "file": src.name}} if "source" in info
+              else {"kind": "usd", "id": src.stem, "file": src.name})
+    write_object(twin, out, object_id=oid, category=category or info.get("category") or "unknown",
+                 source=source, units=read_usd_units(src), overwrite=overwrite)
     return out

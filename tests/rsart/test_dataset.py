@@ -69,6 +69,8 @@ def test_dataset_root(tmp_path, cabinet_dir):
 def test_load_rejects_other_folders(tmp_path):
     with pytest.raises(rsart.RsartError, match="neither a dataset root"):
         rsart.load(tmp_path)
+    with pytest.raises(rsart.RsartError, match="no such file or folder"):
+        rsart.load(tmp_path / "missing")
 
 
 def test_torch_dataset(cabinet_dir):
@@ -93,11 +95,53 @@ def test_export_nerfstudio(cabinet_dir, tmp_path):
     [path] = obj.export_nerfstudio(tmp_path / "ns")
     tf = json.loads(path.read_text())
     assert tf["cx"] == pytest.approx(15.5 + 0.5) and len(tf["frames"]) == 4
+    assert tf["train_filenames"] == ["images/0000.png", "images/0001.png", "images/0002.png"]
+    assert tf["test_filenames"] == tf["val_filenames"] == ["images/0003.png"]
     fr = tf["frames"][1]
-    assert (path.parent / fr["file_path"]).resolve() == (cabinet_dir / "states/m0/rgb/0001.png").resolve()
+    assert (path.parent / fr["file_path"]).read_bytes() == (cabinet_dir / "states/m0/rgb/0001.png").read_bytes()
     gl = np.array(fr["transform_matrix"])
     cv = obj.states["m0"].views[1].camera.c2w
     # OpenGL camera looks down -z: its -z axis equals OpenCV's +z axis; y flips
     np.testing.assert_allclose(-gl[:3, 2], cv[:3, 2], atol=1e-12)
     np.testing.assert_allclose(-gl[:3, 1], cv[:3, 1], atol=1e-12)
     np.testing.assert_allclose(gl[:3, 3], cv[:3, 3])
+
+
+def test_torch_dataset_says_what_exists(cabinet_dir):
+    pytest.importorskip("torch")
+    add_views(cabinet_dir, "m0")
+    obj = rsart.load(cabinet_dir)
+    with pytest.raises(rsart.RsartError, match=r"state 'm1' has no images \(captured states: m0\)"):
+        obj.torch_dataset(states=["m0", "m1"])
+    with pytest.raises(rsart.RsartError, match=r"no state 'zz' \(states: m0, m1"):
+        obj.torch_dataset(states=["zz"])
+    with pytest.raises(rsart.RsartError, match=r"no 'val' views \(splits: test, train\)"):
+        obj.torch_dataset(split="val")
+    assert len(obj.torch_dataset(split="test")) == 1
+
+
+def test_dataset_level_torch_loader(tmp_path):
+    torch = pytest.importorskip("torch")
+    from rsart.twin_io import write_object
+    from tests.conftest import make_cabinet, make_lamp
+
+    for oid, twin in (("cabinet-0000", make_cabinet()), ("lamp-0000", make_lamp())):
+        write_object(twin, tmp_path / oid, object_id=oid, category=oid.split("-")[0], source={"kind": "procedural", "id": "t"})
+        add_views(tmp_path / oid, "m0", n=3)
+        add_views(tmp_path / oid, "m3", n=5)
+    write_index(DatasetIndex("tiny", "1", ["cabinet-0000", "lamp-0000"], {"lamps": ["lamp-0000"]}), tmp_path / "index.json")
+    ds = rsart.load(tmp_path)
+    tds = ds.torch_dataset(states=["m0", "m3"], size=(16, 12))
+    assert len(tds) == 2 * (2 + 4)
+    items = [tds[i] for i in range(len(tds))]
+    assert [it["object_id"] for it in items] == ["cabinet-0000"] * 6 + ["lamp-0000"] * 6
+    assert items[7]["object_index"].item() == 1 and items[7]["state_id"] == "m0"
+    batch = next(iter(torch.utils.data.DataLoader(tds, batch_size=12)))
+    assert batch["image"].shape == (12, 12, 16, 3) and batch["object_index"].tolist() == [0] * 6 + [1] * 6
+    assert len(ds.torch_dataset("lamps", split="test")) == 2
+    with pytest.raises(rsart.RsartError, match=r"no split 'nope' \(splits: lamps\)"):
+        ds.torch_dataset("nope")
+    with pytest.raises(rsart.RsartError, match="no object"):
+        ds.torch_dataset(["cabinet-0000", "ghost"])
+    with pytest.raises(rsart.RsartError, match="cabinet-0000: state 'm1' has no images"):
+        ds.torch_dataset(states=["m1"])

@@ -230,13 +230,16 @@ def test_pd2gs_paper_split(partnet_root, tmp_path, capsys):
                  "--out", str(out), "--resolution", "32", "-q"]) == 0
     cap = capsys.readouterr()
     assert "converted 1/12" in cap.out and "missing" in cap.err and "102373" in cap.err
+    # -q: one summary line per object and the batch line, nothing else (no progress bar, no raw dicts)
+    assert cap.out.count("\n") == 2 and "pm-100676 [Box]" in cap.out and "{" not in cap.err
     idx = json.loads((out / "index.json").read_text())
     assert idx["splits"] == {"pd2gs-paper": ["pm-100676"]}
     # a re-run keeps the finished object (an interrupted batch resumes) and still succeeds
     before = (out / "pm-100676" / "meta.json").stat().st_mtime_ns
     assert main(["convert", "partnet-mobility", "--root", str(partnet_root), "--split", "pd2gs-paper",
                  "--out", str(out), "--resolution", "32", "-q"]) == 0
-    assert "kept existing: ['pm-100676']" in capsys.readouterr().out
+    out_text = capsys.readouterr().out
+    assert "pm-100676: exists, kept" in out_text and "converted 0/12, kept 1" in out_text
     assert (out / "pm-100676" / "meta.json").stat().st_mtime_ns == before
 
 

@@ -222,7 +222,9 @@ def test_convert_usd_cli_roundtrip_and_bad_file(urdf_dir, tmp_path, capsys):
     back = tmp_path / "b"
     assert main(["convert", "usd", str(first / "twin" / "object.usda"), "--out", str(back), "--category", "box"]) == 0
     a, b = read_meta(first), read_meta(back)
-    assert b.source["kind"] == "usd" and b.category == "box"
+    # provenance kept through the USD: the original source, with the file it came back from
+    assert b.source["kind"] == "urdf" and b.source["converted_from"] == {"kind": "usd", "file": "object.usda"}
+    assert b.object_id == a.object_id and b.category == "box"
     (ja,), (jb,) = a.joints, b.joints
     assert jb.type == ja.type and jb.limits == pytest.approx(ja.limits)
     np.testing.assert_allclose(jb.axis, ja.axis, atol=1e-6)

@@ -1,0 +1,111 @@
+"""rsart.load() on raw sources (PartNet-Mobility folder, .urdf, .usda): converted once into a content-keyed
+cache; round trips through the URDF/USD keep the object's identity; missing textures are said, not dropped."""
+from __future__ import annotations
+
+import shutil
+
+import pytest
+
+import rsart
+import rsart.sources.partnet
+from rsart.cli import main
+from rsart.format import read_meta
+from rsart.sources.urdf_twin import MissingTextureWarning
+
+
+def test_load_raw_partnet_folder_converts_once(partnet_root, tmp_path, capfd):
+    src = tmp_path / "148"
+    shutil.copytree(partnet_root / "148", src)
+    cache = tmp_path / "cache"
+    obj = rsart.load(src, cache=cache)
+    err = capfd.readouterr().err
+    assert "converting partnet-mobility" in err and str(cache) in err and err.count("\n") <= 2
+    assert obj.id == "pm-148" and obj.category == "Faucet" and obj.path.parent == cache
+    assert [j.type for j in obj.joints] == ["revolute"] and len(obj.twin.parts) == 2
+    assert obj.meta.source["kind"] == "partnet-mobility" and obj.meta.source["id"] == "148"
+    before = (obj.path / "meta.json").stat().st_mtime_ns
+    again = rsart.load(src, cache=cache)  # cached: no message, same folder, not rewritten
+    assert again.path == obj.path and capfd.readouterr().err == ""
+    assert (obj.path / "meta.json").stat().st_mtime_ns == before
+    # an edited source converts again into a new entry
+    urdf = src / "mobility.urdf"
+    urdf.write_text(urdf.read_text().replace('<robot name="', '<robot name="edited_', 1))
+    edited = rsart.load(src, cache=cache)
+    assert edited.path != obj.path and "converting" in capfd.readouterr().err
+    assert len(list(cache.iterdir())) == 2
+
+
+def test_rsart_cache_env_sets_the_default(partnet_root, tmp_path, monkeypatch, capfd):
+    monkeypatch.setenv("RSART_CACHE", str(tmp_path / "envcache"))
+    obj = rsart.load(partnet_root / "148")  # the shared folder is only read
+    assert obj.path.parent == tmp_path / "envcache"
+    explicit = rsart.load(partnet_root / "148", cache=tmp_path / "explicit")
+    assert explicit.path.parent == tmp_path / "explicit"
+
+
+def test_raw_urdf_and_usd_keep_identity_and_provenance(partnet_root, tmp_path, capfd):
+    """PartNet -> object folder -> its URDF and its USD loaded raw: same id, category and original source."""
+    first = rsart.load(partnet_root / "148", cache=tmp_path / "c")
+    for twin_file in ("object.urdf", "object.usda"):
+        back = rsart.load(first.path / "twin" / twin_file, cache=tmp_path / "c2")
+        assert back.id == "pm-148" and back.category == "Faucet" and back.meta.units == "scene"
+        assert back.meta.source["kind"] == "partnet-mobility" and back.meta.source["id"] == "148"
+        assert back.meta.source["converted_from"]["file"] == twin_file
+        assert [j.name for j in back.joints] == [j.name for j in first.joints]
+
+
+def test_load_refuses_other_files(tmp_path):
+    f = tmp_path / "notes.txt"
+    f.write_text("x")
+    with pytest.raises(rsart.RsartError, match="neither a dataset root"):
+        rsart.load(f)
+
+
+def test_missing_texture_warns_once_and_is_recorded(partnet_root, tmp_path):
+    src = tmp_path / "100676"
+    shutil.copytree(partnet_root / "100676", src)
+    images = sorted((src / "images").iterdir())
+    assert images
+    for im in images:
+        im.unlink()
+    with pytest.warns(MissingTextureWarning) as rec:
+        meta = rsart.sources.partnet.convert_partnet(src, tmp_path / "out", watertight=_fast())
+    assert len([w for w in rec if issubclass(w.category, MissingTextureWarning)]) == 1
+    msg = str(rec[0].message)
+    assert "100676" in msg and images[0].name in msg
+    notes = read_meta(tmp_path / "out").extra["conversion_notes"]
+    assert any("texture image(s)" in n and images[0].name in n for n in notes)
+    assert meta.object_id == "pm-100676"
+
+
+def test_textured_samples_keep_their_textures(partnet_root):
+    """The five shared samples with texture images load with every image referenced by their materials."""
+    from rsart.urdf import read_urdf
+
+    for oid in ("100676", "148", "101940", "45213", "8867"):
+        twin = read_urdf(partnet_root / oid / "mobility.urdf")
+        assert not [p.extra.get("missing_textures") for p in twin.parts if p.extra.get("missing_textures")]
+        textured = [m for p in twin.parts for m in p.visuals
+                    if getattr(getattr(m.visual, "material", None), "image", None) is not None]
+        assert textured, oid
+
+
+def _fast():
+    from rsart.sources.urdf_twin import WatertightConfig
+
+    return WatertightConfig(resolution=32, part_resolution=16, chamfer_samples=0)
+
+
+def test_convert_quiet_and_verbose(partnet_root, tmp_path, capsys):
+    assert main(["convert", "partnet-mobility", str(partnet_root / "148"), "--out", str(tmp_path / "q"),
+                 "--resolution", "32", "-q"]) == 0
+    cap = capsys.readouterr()
+    assert cap.err == "" and cap.out.count("\n") == 1 and "pm-148 [Faucet]" in cap.out
+    assert main(["convert", "partnet-mobility", str(partnet_root / "148"), "--out", str(tmp_path / "v"),
+                 "--resolution", "32", "-v"]) == 0
+    cap = capsys.readouterr()
+    lines = cap.err.strip().splitlines()
+    assert len(lines) == 2 and lines[0].startswith("part base: ") and "faces" in lines[0] and "{" not in cap.err
+    with pytest.raises(SystemExit) as e:
+        main(["convert", "partnet-mobility", str(partnet_root / "148"), "--out", str(tmp_path / "x"), "-q", "-v"])
+    assert e.value.code == 2 and "not allowed with" in capsys.readouterr().err
