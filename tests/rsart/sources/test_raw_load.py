@@ -109,3 +109,31 @@ def test_convert_quiet_and_verbose(partnet_root, tmp_path, capsys):
     with pytest.raises(SystemExit) as e:
         main(["convert", "partnet-mobility", str(partnet_root / "148"), "--out", str(tmp_path / "x"), "-q", "-v"])
     assert e.value.code == 2 and "not allowed with" in capsys.readouterr().err
+
+
+def test_empty_out_folder_is_accepted_non_empty_is_not(partnet_root, tmp_path, capsys):
+    out = tmp_path / "o"
+    out.mkdir()
+    assert main(["convert", "partnet-mobility", str(partnet_root / "148"), "--out", str(out), "--resolution", "32",
+                 "-q"]) == 0
+    assert (out / "meta.json").is_file()
+    usd_out = tmp_path / "u"
+    usd_out.mkdir()
+    assert main(["convert", "usd", str(out / "twin" / "object.usda"), "--out", str(usd_out), "-q"]) == 0
+    assert read_meta(usd_out).object_id == "pm-148"
+    capsys.readouterr()
+    assert main(["convert", "usd", str(out / "twin" / "object.usda"), "--out", str(usd_out), "-q"]) == 2
+    assert "not empty (pass overwrite" in capsys.readouterr().err
+
+
+def test_converted_visuals_keep_textures(partnet_root, tmp_path):
+    """The written twin/visual OBJs of a textured sample carry their texture images (what the renderer draws)."""
+    from rsart.twin_io import read_twin
+
+    assert main(["convert", "partnet-mobility", str(partnet_root / "148"), "--out", str(tmp_path / "o"),
+                 "--resolution", "32", "-q"]) == 0
+    twin = read_twin(tmp_path / "o")
+    images = [m.visual.material.image for p in twin.parts for m in p.visuals
+              if getattr(getattr(m.visual, "material", None), "image", None) is not None]
+    assert len(images) == len(twin.parts) and all(min(im.size) >= 64 for im in images)
+    assert len(list((tmp_path / "o" / "twin" / "visual").glob("*.jp*g"))) == len(twin.parts)
