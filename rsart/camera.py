@@ -9,6 +9,7 @@ live here and nowhere else.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -152,3 +153,14 @@ def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = np.array([0.0,
     c2w = np.eye(4)
     c2w[:3, 0], c2w[:3, 1], c2w[:3, 2], c2w[:3, 3] = x, y, z, eye
     return c2w
+
+
+def corner_origin_intrinsics(K: Intrinsics) -> tuple[float, float, float, float]:
+    """(fx, fy, cx, cy) with the centre of pixel (0, 0) at (0.5, 0.5), as COLMAP, nerfstudio and Blender
+    readers put it (rsart puts it at (0, 0)): ``cx + 0.5, cy + 0.5``; focal lengths unchanged."""
+    return K.fx, K.fy, K.cx + 0.5, K.cy + 0.5
+
+
+def horizontal_fov(K: Intrinsics) -> float:
+    """Horizontal field of view in radians, ``2·atan(width / (2·fx))`` (Blender's ``camera_angle_x``)."""
+    return 2.0 * math.atan(K.width / (2.0 * K.fx))

@@ -28,7 +28,6 @@ world frame = the object's base frame. Camera conversions come from :mod:`rsart.
 """
 from __future__ import annotations
 
-import math
 import os
 import shutil
 from pathlib import Path
@@ -36,6 +35,7 @@ from typing import Callable
 
 import numpy as np
 
+from .camera import corner_origin_intrinsics, horizontal_fov
 from .errors import RsartError
 from .io import atomic_dir, write_json, write_mask_png, write_png_rgb
 
@@ -99,7 +99,8 @@ def _write_ply(path: Path, points: np.ndarray, colors: np.ndarray) -> None:
 
 def _intrinsics_px_corner(K) -> dict:
     """fx, fy, cx, cy, w, h with pixel centres at +0.5 (nerfstudio / COLMAP / Blender convention)."""
-    return {"fl_x": K.fx, "fl_y": K.fy, "cx": K.cx + 0.5, "cy": K.cy + 0.5, "w": K.width, "h": K.height}
+    fx, fy, cx, cy = corner_origin_intrinsics(K)
+    return {"fl_x": fx, "fl_y": fy, "cx": cx, "cy": cy, "w": K.width, "h": K.height}
 
 
 def _check_splits(st) -> tuple[list, list]:
@@ -147,7 +148,7 @@ def _colmap_model(views, K, folder: Path, points: tuple[np.ndarray, np.ndarray] 
 
     rec = pycolmap.Reconstruction()
     cam = pycolmap.Camera(model="PINHOLE", width=K.width, height=K.height,
-                          params=[K.fx, K.fy, K.cx + 0.5, K.cy + 0.5], camera_id=1)
+                          params=list(corner_origin_intrinsics(K)), camera_id=1)
     rec.add_camera_with_trivial_rig(cam)
     (folder / "images").mkdir(parents=True, exist_ok=True)
     for k, v in enumerate(views, 1):
@@ -178,7 +179,7 @@ def write_blender(obj, sid: str, d: Path) -> Path:
     st = obj.states[sid]
     train, test = _check_splits(st)
     K = st.cameras.intrinsics
-    head = {"camera_angle_x": 2.0 * math.atan(K.width / (2.0 * K.fx)), **_intrinsics_px_corner(K),
+    head = {"camera_angle_x": horizontal_fov(K), **_intrinsics_px_corner(K),
             "rsart": {"object_id": obj.id, "state": sid, "values": st.values, "units": obj.meta.units}}
     for v in train + test:
         rgb = v.rgb
