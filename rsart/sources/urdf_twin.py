@@ -404,8 +404,8 @@ def conversion_notes(twin: Twin, notes: list[str], unlimited_range: tuple[float,
     missing = sorted({t for p in twin.parts for t in p.extra.get("missing_textures", [])})
     if missing:
         shown = ", ".join(missing[:5]) + (f" and {len(missing) - 5} more" if len(missing) > 5 else "")
-        msg = (f"{len(missing)} texture image(s) referenced by the meshes' materials are missing: {shown}; "
-               "those surfaces are converted and rendered untextured")
+        msg = (f"{len(missing)} texture image(s) or material file(s) referenced by the meshes are missing: "
+               f"{shown}; those surfaces are converted and rendered untextured")
         warnings.warn(f"{source or twin.name}: {msg}", MissingTextureWarning, stacklevel=2)
         notes = [*notes, msg]
     if notes:

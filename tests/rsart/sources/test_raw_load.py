@@ -74,7 +74,7 @@ def test_missing_texture_warns_once_and_is_recorded(partnet_root, tmp_path):
     msg = str(rec[0].message)
     assert "100676" in msg and images[0].name in msg
     notes = read_meta(tmp_path / "out").extra["conversion_notes"]
-    assert any("texture image(s)" in n and images[0].name in n for n in notes)
+    assert any("texture image(s) or material file(s)" in n and images[0].name in n for n in notes)
     assert meta.object_id == "pm-100676"
 
 
