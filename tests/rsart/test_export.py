@@ -140,6 +140,40 @@ def test_colmap_export_reads_back_with_pycolmap(rendered, tmp_path):
         assert ok.mean() > 0.99 and inside.mean() > 0.97
 
 
+def _legacy_image_names(images_bin):
+    """Image names of a COLMAP images.bin parsed as 3D Gaussian Splatting's read_write_model.py does."""
+    import struct
+
+    names = []
+    with open(images_bin, "rb") as f:
+        (n,) = struct.unpack("<Q", f.read(8))
+        for _ in range(n):
+            f.read(64)  # image_id, qvec, tvec, camera_id
+            name = b""
+            while (c := f.read(1)) != b"\x00":
+                name += c
+            (npts,) = struct.unpack("<Q", f.read(8))
+            f.read(24 * npts)
+            names.append(name.decode())
+        assert f.read() == b""
+    return names
+
+
+def test_colmap_export_parses_as_gaussian_splatting_reads_it(rendered, tmp_path):
+    import struct
+
+    out = tmp_path / "cm"
+    assert main(["export", str(rendered.path), "--to", "colmap", "--state", "m3", "--out", str(out)]) == 0
+    sparse = out / "m3" / "sparse" / "0"
+    assert sorted(_legacy_image_names(sparse / "images.bin")) == [f"{v.id}.png" for v in rendered.states["m3"].split("train")]
+    with open(sparse / "cameras.bin", "rb") as f:
+        n, cam_id, model, w, h = struct.unpack("<QiiQQ", f.read(32))
+        params = struct.unpack("<4d", f.read(32))
+    K = rendered.states["m3"].cameras.intrinsics
+    assert (n, model, w, h) == (1, 1, W, H)  # model 1 = PINHOLE
+    assert params == pytest.approx((K.fx, K.fy, K.cx + 0.5, K.cy + 0.5))
+
+
 def test_export_errors_name_what_exists(rendered, tmp_path, capsys):
     assert main(["export", str(rendered.path), "--to", "colmap", "--state", "m1", "--out", str(tmp_path / "x")]) == 2
     err = capsys.readouterr().err
