@@ -2,8 +2,9 @@
 
 The source is converted once (the same converters as ``rsart convert``) into a cache folder and the
 converted object folder is loaded from there. The cache key is a SHA-256 of the source's *content*
-(every file of a PartNet-Mobility folder; for a URDF or USD file the file itself plus the mesh,
-material, texture and USD files in its folder tree) and of rsart's version, so an edited source or a
+(every file of a PartNet-Mobility folder; for a URDF the file, the meshes it names and their MTL and
+texture files; for a USD file every layer and asset it depends on, as ``UsdUtils.ComputeAllDependencies``
+finds them) and of rsart's version, so an edited source or a
 new rsart converts again, and an unchanged one is never converted twice.
 
 Cache folder: the ``cache`` argument, else ``$RSART_CACHE``, else ``$XDG_CACHE_HOME/rsart`` (default
@@ -14,15 +15,13 @@ from __future__ import annotations
 
 import hashlib
 import os
+import re
 import sys
 from pathlib import Path
 from typing import Callable
 
 from ..errors import RsartError
 
-#: files that can be part of a URDF/USD twin (hashed into the cache key)
-ASSET_SUFFIXES = {".obj", ".mtl", ".stl", ".ply", ".dae", ".glb", ".gltf", ".bin", ".png", ".jpg", ".jpeg",
-                  ".usd", ".usda", ".usdc", ".usdz", ".urdf", ".xml"}
 USD_SUFFIXES = (".usd", ".usda", ".usdc", ".usdz")
 #: refuse to hash more than this many bytes of a source (a URDF next to a huge folder tree)
 MAX_SOURCE_BYTES = 2 * 1024 ** 3
@@ -47,27 +46,85 @@ def source_kind(path: Path) -> str | None:
     return None
 
 
-def _source_files(path: Path, kind: str) -> list[Path]:
-    if kind == "partnet-mobility":
-        root, files = path, [p for p in path.rglob("*") if p.is_file()]
-    else:
-        root = path.parent
-        files = [path] + [p for p in root.rglob("*") if p.is_file() and p != path
-                          and p.suffix.lower() in ASSET_SUFFIXES
-                          and not any(part.startswith(".") for part in p.relative_to(root).parts)]
+def _inside(p: Path, root: Path) -> bool:
+    p = p.resolve()
+    return (p == root or root in p.parents) and p.is_file()
+
+
+def _obj_side_files(obj: Path, root: Path) -> list[Path]:
+    """MTL files an OBJ names (``mtllib``) and the images those name (``map_*``), inside ``root`` only."""
     out = []
-    for p in files:  # symlinks leading out of the source folder are not followed
-        rp = p.resolve()
-        if rp == root.resolve() or root.resolve() in rp.parents:
-            out.append(p)
-    return sorted(out, key=lambda p: p.relative_to(root).as_posix())
+    try:
+        text = obj.read_text(encoding="utf-8", errors="replace")
+    except OSError:
+        return out
+    for mtl in re.findall(r"(?m)^\s*mtllib\s+(.+?)\s*$", text):
+        mp = obj.parent / mtl
+        if not _inside(mp, root):
+            continue
+        out.append(mp)
+        mtext = mp.read_text(encoding="utf-8", errors="replace")
+        for img in re.findall(r"(?m)^\s*map_\w+\s+(?:-\S+\s+\S+\s+)*(.+?)\s*$", mtext):
+            ip = mp.parent / img
+            if _inside(ip, root):
+                out.append(ip)
+    return out
+
+
+def _urdf_files(path: Path) -> list[Path]:
+    """The URDF, the mesh files it names (inside its folder, as the reader resolves them) and their MTLs/images."""
+    import defusedxml.ElementTree as DET
+
+    root = path.parent.resolve()
+    files = [path]
+    try:
+        xml = DET.fromstring(path.read_bytes(), forbid_dtd=True)
+    except Exception:  # the converter reports what is wrong with the file
+        return files
+    for el in xml.iter("mesh"):
+        fn = el.get("filename") or ""
+        if fn.startswith("package://"):  # the same rule as rsart.urdf's mesh lookup
+            fn = fn.split("/", 3)[-1] if fn.count("/") >= 3 else fn[len("package://"):]
+        if fn.startswith("file://"):
+            fn = fn[len("file://"):]
+        mp = path.parent / fn
+        if os.path.isabs(fn) or not _inside(mp, root):
+            continue
+        files.append(mp)
+        if mp.suffix.lower() == ".obj":
+            files += _obj_side_files(mp, root)
+    return files
+
+
+def _usd_files(path: Path) -> list[Path]:
+    """The USD file and every layer and asset it depends on (``UsdUtils.ComputeAllDependencies``)."""
+    try:
+        from pxr import UsdUtils
+
+        layers, assets, _ = UsdUtils.ComputeAllDependencies(str(path))
+    except Exception:  # unreadable: the converter reports it
+        return [path]
+    found = [Path(lay.realPath) for lay in layers if lay.realPath] + [Path(a) for a in assets]
+    return [path] + [p for p in found if p.is_file()]
+
+
+def _source_files(path: Path, kind: str) -> list[Path]:
+    """Every file whose content the conversion depends on, sorted, without duplicates."""
+    if kind == "partnet-mobility":
+        root = path.resolve()
+        files = [p for p in path.rglob("*") if _inside(p, root)]  # symlinks out of the folder are not followed
+    elif kind == "urdf":
+        files = _urdf_files(path)
+    else:
+        files = _usd_files(path)
+    return sorted({p.resolve() for p in files}, key=lambda p: p.as_posix())
 
 
 def content_key(path: Path, kind: str) -> str:
     """Hex SHA-256 over rsart's version, the kind, and (relative name, bytes) of every source file."""
     from .. import __version__
 
-    root = path if kind == "partnet-mobility" else path.parent
+    base = (path if kind == "partnet-mobility" else path.parent).resolve()
     h = hashlib.sha256(f"rsart {__version__}\n{kind}\n".encode())
     total = 0
     for p in _source_files(path, kind):
@@ -75,7 +132,7 @@ def content_key(path: Path, kind: str) -> str:
         if total > MAX_SOURCE_BYTES:
             raise RsartError(f"{path}: the source's files exceed {MAX_SOURCE_BYTES >> 30} GiB; convert it with "
                              "`rsart convert` instead")
-        h.update(p.relative_to(root).as_posix().encode() + b"\0")
+        h.update((p.relative_to(base).as_posix() if base in p.parents else p.as_posix()).encode() + b"\0")
         with open(p, "rb") as f:
             for chunk in iter(lambda: f.read(1 << 20), b""):
                 h.update(chunk)

@@ -137,3 +137,28 @@ def test_converted_visuals_keep_textures(partnet_root, tmp_path):
               if getattr(getattr(m.visual, "material", None), "image", None) is not None]
     assert len(images) == len(twin.parts) and all(min(im.size) >= 64 for im in images)
     assert len(list((tmp_path / "o" / "twin" / "visual").glob("*.jp*g"))) == len(twin.parts)
+
+
+def test_cache_key_follows_what_the_source_uses(partnet_root, tmp_path):
+    """URDF: the key covers the file, its meshes and their MTL/texture images, not unrelated files beside it.
+    USD: every layer/asset it depends on."""
+    from rsart.sources.cache import content_key
+
+    src = tmp_path / "o"
+    shutil.copytree(rsart.load(partnet_root / "148", cache=tmp_path / "c").path, src)
+    urdf, usd = src / "twin" / "object.urdf", src / "twin" / "object.usda"
+    k_urdf, k_usd = content_key(urdf, "urdf"), content_key(usd, "usd")
+    (src / "twin" / "notes.txt").write_text("unrelated")
+    (src / "twin" / "parts" / "extra.ply").write_bytes(b"not used by the URDF")
+    assert content_key(urdf, "urdf") == k_urdf
+    [img] = [p for p in (src / "twin" / "visual").iterdir() if p.name.startswith("base") and p.suffix != ".obj"
+             and p.suffix != ".mtl"]
+    img.write_bytes(img.read_bytes() + b"\0")  # an edited texture converts again
+    assert content_key(urdf, "urdf") != k_urdf
+    # the USD holds its meshes inline: an edited visual OBJ does not change its key, an edited USD texture does
+    mesh = src / "twin" / "visual" / "switch_0.obj"
+    mesh.write_text(mesh.read_text() + "\n# edited\n")
+    assert content_key(usd, "usd") == k_usd
+    [tex] = list((src / "twin" / "textures").glob("base*.png"))
+    tex.write_bytes(tex.read_bytes() + b"\0")
+    assert content_key(usd, "usd") != k_usd
