@@ -104,31 +104,9 @@ def _log(args):
     return (lambda msg: print(msg, file=sys.stderr)) if getattr(args, "verbose", False) else None
 
 
-class PartProgress:
-    """A tqdm progress bar over one object's parts (stderr, only on a terminal; none with -q or -v).
+def _progress(args, desc: str):
+    from ..sources.urdf_twin import PartProgress
 
-    Call it as ``progress(done, total, part_name)``; ``close()`` when the object is finished."""
-
-    def __init__(self, desc: str, enabled: bool = True):
-        self.desc, self.enabled, self.bar = desc, enabled, None
-
-    def __call__(self, done: int, total: int, name: str) -> None:
-        if not self.enabled:
-            return
-        if self.bar is None:
-            from tqdm import tqdm
-
-            self.bar = tqdm(total=total, desc=self.desc, unit="part", file=sys.stderr, leave=False, disable=None)
-        self.bar.set_postfix_str(name, refresh=False)
-        self.bar.update(done - self.bar.n)
-
-    def close(self) -> None:
-        if self.bar is not None:
-            self.bar.close()
-            self.bar = None
-
-
-def _progress(args, desc: str) -> PartProgress:
     return PartProgress(desc, enabled=not (args.quiet or getattr(args, "verbose", False)))
 
 

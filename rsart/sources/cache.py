@@ -176,26 +176,15 @@ def cached_object(path: str | os.PathLike, cache: str | os.PathLike | None = Non
         return out
     if not quiet:
         print(f"rsart: converting {kind} {path} once into {out} (cached by content)", file=sys.stderr)
-    bar = None
+    from .urdf_twin import PartProgress
 
-    def progress(done: int, total: int, part: str) -> None:
-        nonlocal bar
-        if quiet:
-            return
-        if bar is None:
-            from tqdm import tqdm
-
-            bar = tqdm(total=total, desc=f"{name} parts", unit="part", file=sys.stderr, leave=False, disable=None)
-        bar.set_postfix_str(part, refresh=False)
-        bar.update(done - bar.n)
-
+    bar = PartProgress(f"{name} parts", enabled=not quiet)
     try:
-        _convert(path, kind, out, progress)
+        _convert(path, kind, out, bar)
     except RsartError as e:
         if (out / "meta.json").is_file():  # another process finished the same conversion first
             return out
         raise RsartError(f"{path}: cannot load it directly: {e}") from None
     finally:
-        if bar is not None:
-            bar.close()
+        bar.close()
     return out

@@ -327,6 +327,32 @@ def describe_watertight(info: dict[str, Any]) -> str:
     return out + ("" if info.get("watertight", True) else ", NOT watertight")
 
 
+class PartProgress:
+    """A tqdm progress bar over one object's parts on stderr (shown only on a terminal), for the
+    ``progress`` callback of :func:`with_watertight_meshes`: ``progress(done, total, part_name)``;
+    ``close()`` when the object is finished. ``enabled=False`` shows nothing."""
+
+    def __init__(self, desc: str, enabled: bool = True):
+        self.desc, self.enabled, self.bar = desc, enabled, None
+
+    def __call__(self, done: int, total: int, name: str) -> None:
+        if not self.enabled:
+            return
+        if self.bar is None:
+            import sys
+
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=total, desc=self.desc, unit="part", file=sys.stderr, leave=False, disable=None)
+        self.bar.set_postfix_str(name, refresh=False)
+        self.bar.update(done - self.bar.n)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+            self.bar = None
+
+
 def with_watertight_meshes(twin: Twin, cfg: WatertightConfig = WatertightConfig(),
                            log=None, progress=None) -> Twin:
     """The twin with each part's ``mesh`` replaced by its watertight copy; the original meshes become (or
