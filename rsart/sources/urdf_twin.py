@@ -358,8 +358,8 @@ def with_watertight_meshes(twin: Twin, cfg: WatertightConfig = WatertightConfig(
     """The twin with each part's ``mesh`` replaced by its watertight copy; the original meshes become (or
     stay) the part's ``visuals``; the copy's record goes to ``part.extra["watertight"]``.
 
-    ``log(msg)`` gets one readable line per part; ``progress(done, total, part_name)`` is called after
-    each part (for a progress bar)."""
+    ``log(msg)`` gets one readable line per part; ``progress(done, total, part_name)`` is called before
+    each part (``done`` parts finished, ``part_name`` in the works) and once at the end (for a progress bar)."""
     b = np.array([[np.inf] * 3, [-np.inf] * 3])
     for p in twin.parts:
         if len(p.mesh.vertices):
@@ -368,6 +368,8 @@ def with_watertight_meshes(twin: Twin, cfg: WatertightConfig = WatertightConfig(
     obj_diag = float(np.linalg.norm(b[1] - b[0]))
     parts = []
     for p in twin.parts:
+        if progress:  # before each part: the bar shows which part is being remeshed
+            progress(len(parts), len(twin.parts), p.name)
         part_diag = float(np.linalg.norm(p.mesh.extents)) or obj_diag
         try:
             wt, info = watertight_copy(p.mesh, cfg.pitch(obj_diag, part_diag), cfg)
@@ -377,8 +379,8 @@ def with_watertight_meshes(twin: Twin, cfg: WatertightConfig = WatertightConfig(
             log(f"  part {p.name}: {describe_watertight(info)}")
         vis = p.visuals or [p.mesh]
         parts.append(TwinPart(p.index, p.name, wt, vis, {**p.extra, "watertight": info}))
-        if progress:
-            progress(len(parts), len(twin.parts), p.name)
+    if progress:
+        progress(len(parts), len(twin.parts), "done")
     return Twin(twin.name, parts, list(twin.joints))
 
 
