@@ -344,7 +344,7 @@ class PartProgress:
             from tqdm import tqdm
 
             self.bar = tqdm(total=total, desc=self.desc, unit="part", file=sys.stderr, leave=False, disable=None)
-        self.bar.set_postfix_str(name, refresh=False)
+        self.bar.set_postfix_str(name)
         self.bar.update(done - self.bar.n)
 
     def close(self) -> None:
