@@ -37,6 +37,7 @@ import numpy as np
 
 from .camera import corner_origin_intrinsics, horizontal_fov
 from .errors import RsartError
+from .extras import imported, require
 from .io import atomic_dir, write_json, write_mask_png, write_png_rgb
 
 FORMATS = ("nerfstudio", "colmap", "blender")
@@ -144,7 +145,7 @@ def write_nerfstudio(obj, sid: str, d: Path) -> Path:
 
 
 def _colmap_model(views, K, folder: Path, points: tuple[np.ndarray, np.ndarray] | None) -> None:
-    import pycolmap
+    pycolmap = imported("pycolmap", "capture", "rsart export --to colmap")
 
     rec = pycolmap.Reconstruction()
     cam = pycolmap.Camera(model="PINHOLE", width=K.width, height=K.height,
@@ -205,6 +206,8 @@ def export(obj, to: str, out: str | os.PathLike, *, states: list[str] | None = N
     """
     if to not in WRITERS:
         raise RsartError(f"unknown export format {to!r} (formats: {', '.join(FORMATS)})")
+    if to == "colmap":  # say so before anything is read or written
+        require("capture", "rsart export --to colmap", modules=("pycolmap",))
     sids = _states(obj, states)
     written = []
     with atomic_dir(out, overwrite=overwrite) as tmp:

@@ -174,6 +174,12 @@ def cached_object(path: str | os.PathLike, cache: str | os.PathLike | None = Non
     out = cache_dir / f"{kind}-{safe}-{content_key(path, kind)[:16]}"
     if (out / "meta.json").is_file():
         return out
+    from ..extras import require  # converting (not loading a cached object) needs the importer's extra
+
+    if kind == "usd":
+        require("usd", f"loading {path.name} (a USD file)")
+    else:  # watertight copies need open3d
+        require("render", f"loading {path} (converted with the {kind} importer)", modules=("open3d",))
     if not quiet:
         print(f"rsart: converting {kind} {path} once into {out} (cached by content)", file=sys.stderr)
     from .urdf_twin import PartProgress

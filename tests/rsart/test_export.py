@@ -184,3 +184,19 @@ def test_export_errors_name_what_exists(rendered, tmp_path, capsys):
     assert "not empty" in capsys.readouterr().err and (tmp_path / "full" / "keep.txt").is_file()
     assert main(["export", str(rendered.path), "--method", "nerfstudio", "--out", str(tmp_path / "ns")]) == 0
     assert (tmp_path / "ns" / "m0" / "transforms.json").is_file()
+
+
+def test_colmap_without_pycolmap_says_which_extra(rendered, tmp_path):
+    """With pycolmap hidden (the [capture] extra missing), one line naming the pip command, exit 2, nothing written."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    repo = Path(__file__).resolve().parents[2]
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(repo / "tests" / "rsart" / "hide_extras"), str(repo)]),
+               RSART_HIDE="pycolmap")
+    p = subprocess.run([sys.executable, "-m", "rsart", "export", str(rendered.path), "--to", "colmap",
+                        "--out", str(tmp_path / "cm")], capture_output=True, text=True, env=env, timeout=120)
+    assert p.returncode == 2 and "Traceback" not in p.stderr
+    assert p.stderr.strip().endswith("pip install 'rsart[capture]'") and not (tmp_path / "cm").exists()

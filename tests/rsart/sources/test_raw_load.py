@@ -162,3 +162,21 @@ def test_cache_key_follows_what_the_source_uses(partnet_root, tmp_path):
     [tex] = list((src / "twin" / "textures").glob("base*.png"))
     tex.write_bytes(tex.read_bytes() + b"\0")
     assert content_key(usd, "usd") != k_usd
+
+
+def test_raw_load_without_open3d_names_the_extra(partnet_root, tmp_path):
+    """Converting needs the [render] extra (open3d): without it, MissingExtra names the pip command."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    repo = Path(__file__).resolve().parents[3]
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(repo / "tests" / "rsart" / "hide_extras"), str(repo)]),
+               RSART_HIDE="open3d")
+    code = ("import rsart, sys\ntry:\n    rsart.load(sys.argv[1], cache=sys.argv[2])\n"
+            "except rsart.RsartError as e:\n    print(type(e).__name__, e)\n")
+    p = subprocess.run([sys.executable, "-c", code, str(partnet_root / "148"), str(tmp_path / "c")],
+                       capture_output=True, text=True, env=env, timeout=120)
+    assert p.stdout.startswith("MissingExtra") and p.stdout.strip().endswith("pip install 'rsart[render]'"), p
+    assert not (tmp_path / "c").exists()
