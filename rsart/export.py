@@ -38,7 +38,7 @@ import numpy as np
 from .camera import corner_origin_intrinsics, horizontal_fov
 from .errors import RsartError
 from .extras import imported, require
-from .io import atomic_dir, write_json, write_mask_png, write_png_rgb
+from .io import atomic_dir, check_inside, write_json, write_mask_png, write_png_rgb
 
 FORMATS = ("nerfstudio", "colmap", "blender")
 #: at most this many back-projected points per export (evenly subsampled, seeded)
@@ -59,6 +59,11 @@ def _states(obj, states: list[str] | None) -> list[str]:
             raise RsartError(f"{obj.path}: state {sid!r} has no captured views "
                              f"(captured: {', '.join(captured) or 'none'})")
     return list(states)
+
+
+def _copy_image(view, kind: str, dst: Path) -> None:
+    """Copy a view's ``kind`` PNG byte for byte, after the loader's inside-the-dataset check (no symlink out)."""
+    shutil.copyfile(check_inside(view.root or view.state_dir.parent.parent, view.path(kind)), dst)
 
 
 def _object_mask(view) -> np.ndarray | None:
@@ -120,11 +125,11 @@ def write_nerfstudio(obj, sid: str, d: Path) -> Path:
     frames, names = [], {"train": [], "test": []}
     for v in train + test:
         fp = f"images/{v.id}.png"
-        shutil.copyfile(v.path("rgb"), d / fp)
+        _copy_image(v, "rgb", d / fp)
         fr = {"file_path": fp, "transform_matrix": v.camera.c2w_opengl().tolist(), "rsart_split": v.split}
         if v.has_depth:
             fr["depth_file_path"] = f"depth/{v.id}.png"
-            shutil.copyfile(v.path("depth"), d / fr["depth_file_path"])
+            _copy_image(v, "depth", d / fr["depth_file_path"])
         m = _object_mask(v)
         if m is not None:
             fr["mask_path"] = f"masks/{v.id}.png"
@@ -154,7 +159,7 @@ def _colmap_model(views, K, folder: Path, points: tuple[np.ndarray, np.ndarray] 
     (folder / "images").mkdir(parents=True, exist_ok=True)
     for k, v in enumerate(views, 1):
         name = f"{v.id}.png"
-        shutil.copyfile(v.path("rgb"), folder / "images" / name)
+        _copy_image(v, "rgb", folder / "images" / name)
         im = pycolmap.Image(name=name, camera_id=1, image_id=k)
         rec.add_image_with_trivial_frame(im, pycolmap.Rigid3d(v.camera.w2c[:3, :4]))
     if points is not None:

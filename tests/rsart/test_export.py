@@ -200,3 +200,18 @@ def test_colmap_without_pycolmap_says_which_extra(rendered, tmp_path):
                         "--out", str(tmp_path / "cm")], capture_output=True, text=True, env=env, timeout=120)
     assert p.returncode == 2 and "Traceback" not in p.stderr
     assert p.stderr.strip().endswith("pip install 'rsart[capture]'") and not (tmp_path / "cm").exists()
+
+
+def test_export_refuses_an_image_that_leads_out(rendered, tmp_path, capsys):
+    """A symlinked RGB pointing outside the dataset is refused (as the loader refuses it), nothing written."""
+    import shutil
+
+    data = tmp_path / "data"
+    shutil.copytree(rendered.path.parent, data)
+    secret = tmp_path / "secret.png"
+    secret.write_bytes(b"not yours")
+    victim = data / "cabinet-0000" / "states" / "m0" / "rgb" / "0000.png"
+    victim.unlink()
+    victim.symlink_to(secret)
+    assert main(["export", str(data / "cabinet-0000"), "--to", "colmap", "--state", "m0", "--out", str(tmp_path / "o")]) == 2
+    assert "leads out of" in capsys.readouterr().err and not (tmp_path / "o").exists()
