@@ -199,10 +199,9 @@ class RSArtObject:
         ``states``), ``state_id`` and ``view_id`` strings. ``size`` = (width, height) resamples images and K.
         Raises RsartError for an unknown state, a state without images or a split without views.
         """
-        views = self.torch_views(states, split)  # wrong states/splits are reported even without torch
-        from .torch_data import ViewDataset
+        from .torch_data import ViewDataset  # a missing [torch] extra is said first
 
-        return ViewDataset(views, size=size, with_depth=with_depth, with_mask=with_mask)
+        return ViewDataset(self.torch_views(states, split), size=size, with_depth=with_depth, with_mask=with_mask)
 
     def export(self, to: str, out_dir: str | os.PathLike, states: list[str] | None = None,
                overwrite: bool = False) -> list[Path]:
