@@ -182,6 +182,8 @@ def _score_object(task: _Task) -> dict:
     twin = read_twin(task.folder, meta, visuals=False)
     true = _true_joints(meta, twin, start, end)
     gt_posed = {sid: twin.posed_meshes(meta.state(sid).values) for sid in states}
+    box = np.concatenate([twin.bounds(meta.state(s).values) for s in (start, end)])
+    res["bbox_diag"] = float(np.linalg.norm(box.max(0) - box.min(0)))  # scene size for the penalty caps (report.py)
     res["chamfer_floor"] = {sid: {"static": chamfer_floor(mesh_area(gt_posed[sid][0]), cfg.chamfer.n_samples),
                                   "whole": chamfer_floor(sum(mesh_area(m) for m in gt_posed[sid]),
                                                          cfg.chamfer.n_samples)} for sid in states}

@@ -139,7 +139,8 @@ def test_null_object_is_a_counted_failure_never_a_number(dataset, sub_copy):
     assert "-1000" not in text
     agg = scores["aggregate"]
     assert agg["overall"]["n_failed_objects"] == 1
-    assert agg["categories"]["lamp"]["metrics"]["axis_ang"] == {"mean": None, "n": 0, "n_failed": 1}
+    assert agg["categories"]["lamp"]["metrics"]["axis_ang"] == {"mean": None, "n": 0, "n_failed": 1, "n_applicable": 1,
+                                                                "completion": 0.0, "penalised_mean": 90.0}
     # the Mean column averages the categories that scored: storage only
     assert agg["overall"]["mean_of_categories"]["axis_ang"]["mean"] == agg["categories"]["storage"]["metrics"]["axis_ang"]["mean"]
     md = summary_markdown(scores)
@@ -148,6 +149,8 @@ def test_null_object_is_a_counted_failure_never_a_number(dataset, sub_copy):
     assert cells[1] == "*"                     # lamp column (categories sorted: lamp, storage)
     assert cells[2] == "0.000"                 # storage
     assert cells[3] == "0.000*"                # Mean carries the failure mark
+    assert cells[4] == "45.000"                # penalised: (lamp 90 + storage 0) / 2
+    assert cells[5] == "50 %"                  # completion: (lamp 0 + storage 1) / 2
     assert "lamp-0000" in md.split("## Failures")[1]
 
 
