@@ -36,7 +36,7 @@ def _add(args) -> int:
 
     engine = open_engine(args.db)
     for d in args.scores:
-        sid, created = add_scores(engine, d)
+        sid, created = add_scores(engine, d, label=args.label)
         print(f"{d}: {'added as' if created else 'already stored as'} submission {sid}")
     return 0
 
@@ -48,7 +48,7 @@ def _build(args) -> int:
     from .schema import open_engine
 
     t = time.perf_counter()
-    out = build_site(open_engine(args.db), args.out, plots=not args.no_plots)
+    out = build_site(open_engine(args.db), args.out, plots=not args.no_plots, all_runs=args.all_runs)
     print(f"site written to {out} in {time.perf_counter() - t:.1f} s (open {out / 'index.html'})")
     return 0
 
@@ -103,23 +103,35 @@ def _seeds(s: str) -> list[int]:
         raise argparse.ArgumentTypeError(f"{s!r} is not a comma list of integers") from None
 
 
-def register(sub: argparse._SubParsersAction) -> None:
-    """Add ``leaderboard`` and its actions to an argparse subparsers object."""
-    p = sub.add_parser("leaderboard", help="result store, static leaderboard site and submission server",
-                       description="Leaderboards for rsart-eval scores (docs/leaderboard.md). Published rows of the "
-                                   "PD²GS paper are shown apart and never ranked with computed scores.")
-    p.set_defaults(func=lambda a: (p.print_help(), 2)[1])
-    lsub = p.add_subparsers(dest="leaderboard_command", metavar="ACTION")
+DESCRIPTION = ("Leaderboards for rsart-eval scores (docs/leaderboard.md): one row per submission (run label, "
+               "config hash), ranked by the penalised mean with the completion rate beside it. Published rows of "
+               "the PD²GS paper are shown apart and never ranked with computed scores.")
 
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``leaderboard`` and its actions to an argparse subparsers object (``rsart leaderboard ...``)."""
+    p = sub.add_parser("leaderboard", help="result store, static leaderboard site and submission server",
+                       description=DESCRIPTION)
+    p.set_defaults(func=lambda a: (p.print_help(), 2)[1])
+    add_actions(p.add_subparsers(dest="leaderboard_command", metavar="ACTION"))
+
+
+def add_actions(lsub: argparse._SubParsersAction) -> None:
+    """The actions add, build, serve and token (shared by ``rsart leaderboard`` and ``rsart-leaderboard``)."""
     a = lsub.add_parser("add", help="ingest rsart-eval output folders (scores.json); idempotent")
     a.add_argument("scores", nargs="+", type=Path, help="rsart-eval --out folder(s) or scores.json file(s)")
     a.add_argument("--db", required=True, help=DB_HELP)
+    a.add_argument("--label", help="run label shown in the tables (default: the method block's \"run\", else "
+                                   "#<submission id>)")
     a.set_defaults(func=_add)
 
     b = lsub.add_parser("build", help="write the static site (HTML, Markdown, CSV)")
     b.add_argument("--db", required=True, help=DB_HELP)
     b.add_argument("--out", required=True, type=Path, help="site folder (replaced atomically)")
     b.add_argument("--no-plots", action="store_true", help="skip the per-method PNG plots")
+    b.add_argument("--all-runs", action="store_true",
+                   help="rank every run of each method (default: each method's best-ranked run; every run is "
+                        "always on the method's page)")
     b.set_defaults(func=_build)
 
     s = lsub.add_parser("serve", help="run the submission server with scoring workers")
@@ -153,9 +165,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="rsart-leaderboard")
-    register(parser.add_subparsers(dest="command", metavar="COMMAND"))
-    args = parser.parse_args(["leaderboard", *(sys.argv[1:] if argv is None else argv)])
+    parser = argparse.ArgumentParser(prog="rsart-leaderboard", description=DESCRIPTION)
+    parser.set_defaults(func=lambda a: (parser.print_help(), 2)[1])
+    add_actions(parser.add_subparsers(dest="leaderboard_command", metavar="ACTION"))
+    args = parser.parse_args(sys.argv[1:] if argv is None else argv)
     try:
         return int(args.func(args) or 0)
     except RsartError as e:

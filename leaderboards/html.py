@@ -27,7 +27,7 @@ th{background:#f2f2f2} td.n{text-align:right;font-variant-numeric:tabular-nums} 
 table.sortable th{cursor:pointer} table.sortable th.asc::after{content:" ▲"} table.sortable th.desc::after{content:" ▼"}
 .badge{display:inline-block;font-size:.75em;padding:.05em .45em;border-radius:.6em;margin-left:.4em;vertical-align:middle}
 .published{background:#fff4d6;border:1px solid #e0b84c} .computed{background:#e2f2e2;border:1px solid #7bb27b}
-tr.pub td{background:#fffbef;font-style:italic} .note{color:#555;font-size:.85em} details{margin:.4em 0}
+tr.pub td{background:#fffbef;font-style:italic} td.best{font-weight:bold;background:#e2f2e2} .note{color:#555;font-size:.85em} details{margin:.4em 0}
 """
 
 SORT_JS = """

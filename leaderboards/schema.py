@@ -53,6 +53,10 @@ submissions = Table(
     Column("team", String(200)),
     Column("source", String(40), nullable=False),  # "cli" | "server" | "synthetic"
     Column("created_at", Float, nullable=False),
+    Column("run_label", String(200)),        # the run's name (method.run / --label); NULL = none given
+    Column("run_config_hash", String(64)),   # SHA-256 of the method block's settings (store.run_config_hash)
+    Column("units", String(40)),             # the scored objects' units ("m", "" unitless, "mixed")
+    Column("completion", Float),             # share of objects that are not null
 )
 Index("ix_submissions_dataset", submissions.c.dataset_name, submissions.c.dataset_version)
 
@@ -81,6 +85,8 @@ aggregates = Table(
     Column("value", Float),
     Column("n", Integer, nullable=False),
     Column("n_failed", Integer, nullable=False),
+    Column("penalised", Float),    # the penalised mean (failures at the worst value; docs/evaluation.md §4.1)
+    Column("completion", Float),   # objects scored without failure / objects where the metric applies
 )
 Index("ix_aggregates_submission", aggregates.c.submission_id)
 
@@ -164,6 +170,7 @@ def open_engine(url: str, create: bool = True) -> Engine:
         metadata.create_all(engine)
         _add_scorer_version(engine)
         _add_job_lease_column(engine)
+        _add_missing_columns(engine)
     return engine
 
 
@@ -188,3 +195,22 @@ def _add_job_lease_column(engine: Engine) -> None:
         except Exception:  # another process added it first
             if "heartbeat_at" not in {c["name"] for c in inspect(engine).get_columns("jobs")}:
                 raise
+
+
+def _add_missing_columns(engine: Engine) -> None:
+    """Bring a store written by an older rsart up to date: add the nullable columns it lacks (no data is
+    changed; older submissions show those fields as unknown)."""
+    from sqlalchemy import inspect, text
+
+    insp = inspect(engine)
+    for t in (submissions, aggregates):
+        have = {c["name"] for c in insp.get_columns(t.name)}
+        missing = [c for c in t.columns if c.name not in have and c.nullable]
+        for c in missing:
+            try:
+                with engine.begin() as conn:
+                    conn.execute(text(f"ALTER TABLE {t.name} ADD COLUMN {c.name} "
+                                      f"{c.type.compile(dialect=engine.dialect)}"))
+            except Exception:  # another process added it first
+                if c.name not in {x["name"] for x in inspect(engine).get_columns(t.name)}:
+                    raise

@@ -12,6 +12,7 @@ from __future__ import annotations
 import io
 import time
 from collections import defaultdict
+from dataclasses import dataclass
 from pathlib import Path
 
 from sqlalchemy import and_, func, select
@@ -49,38 +50,107 @@ def _method_label(s: SubmissionRow) -> str:
     return f"{s.method_name} {s.method_version}".strip()
 
 
-def group_subs(subs: list[SubmissionRow], latest_only: bool = False) -> dict[str, dict[str, list[SubmissionRow]]]:
-    """dataset label → track key → submissions (insertion order); with ``latest_only`` one row per method
-    (its newest submission in that dataset and track; every submission stays on the method's page)."""
+def pen_value(s: SubmissionRow, category: str, key: str) -> float | None:
+    """The submission's penalised mean of ``key`` in ``category`` (None if not applicable or unknown)."""
+    return s.pen.get(category, {}).get(key, (None, None))[0]
+
+
+def rank_subs(subs: list[SubmissionRow], category: str, metrics: list[str]) -> list[tuple[float | None, SubmissionRow]]:
+    """(mean rank, submission), best first. Per metric, rows are ranked by their **penalised** mean (failures at
+    the metric's worst value, docs/evaluation.md §4.1; ties share the mean of their positions; a row with no
+    value ranks last); a row's score is its mean rank over the metrics that any row has. Ties: higher
+    completion first, then the older submission."""
+    n = len(subs)
+    ranks: dict[int, list[float]] = {s.id: [] for s in subs}
+    for k in metrics:
+        vals = {s.id: pen_value(s, category, k) for s in subs}
+        have = sorted((v for v in vals.values() if v is not None), reverse=INFO[k].higher_better)
+        if not have:
+            continue
+        for sid, v in vals.items():
+            if v is None:
+                ranks[sid].append(float(n))
+            else:
+                pos = [i + 1 for i, x in enumerate(have) if x == v]
+                ranks[sid].append(sum(pos) / len(pos))
+    score = {sid: (sum(r) / len(r) if r else None) for sid, r in ranks.items()}
+    order = sorted(subs, key=lambda s: (score[s.id] is None, score[s.id] or 0.0, -(s.completion or 0.0), s.created_at))
+    return [(score[s.id], s) for s in order]
+
+
+def group_subs(subs: list[SubmissionRow], all_runs: bool = True) -> dict[str, dict[str, list[SubmissionRow]]]:
+    """dataset label → track key → submissions, ranked (:func:`rank_subs` on the Mean over categories);
+    without ``all_runs`` one row per method: its best-ranked run in that dataset and track (every run
+    stays on the method's page)."""
     out: dict[str, dict[str, list[SubmissionRow]]] = {}
     for s in subs:
         out.setdefault(s.dataset_label, {}).setdefault(Track(**s.track).key(), []).append(s)
-    if latest_only:
-        for tracks in out.values():
-            for k, ss in tracks.items():
-                newest: dict[str, SubmissionRow] = {}
-                for s in ss:
-                    if s.method_name not in newest or s.created_at >= newest[s.method_name].created_at:
-                        newest[s.method_name] = s
-                tracks[k] = [s for s in ss if newest[s.method_name] is s]
+    for tracks in out.values():
+        for k, ss in tracks.items():
+            ranked = [s for _r, s in rank_subs(ss, S.MEAN, present_metrics(ss))]
+            if not all_runs:
+                seen: set[str] = set()
+                ranked = [s for s in ranked if not (s.method_name in seen or seen.add(s.method_name))]
+            tracks[k] = ranked
     return out
 
 
-def latest_per_method(subs: list[SubmissionRow]) -> list[SubmissionRow]:
-    """Newest submission of each method in each dataset and track."""
-    return [s for tracks in group_subs(subs, latest_only=True).values() for ss in tracks.values() for s in ss]
+def best_per_method(subs: list[SubmissionRow]) -> list[SubmissionRow]:
+    """Best-ranked run of each method in each dataset and track."""
+    return [s for tracks in group_subs(subs, all_runs=False).values() for ss in tracks.values() for s in ss]
 
 
-def _row_head(s: SubmissionRow, prefix: str) -> list[Cell]:
-    name = Cell(_method_label(s), s.method_name.lower())
-    return [name, Cell(s.team or "", (s.team or "").lower()),
+def _row_head(s: SubmissionRow) -> list[Cell]:
+    cfg = s.run_config_hash or ""
+    return [Cell(_method_label(s), s.method_name.lower()),
+            Cell(s.run, s.run.lower(), "", f"submission {s.id}"),
+            Cell(cfg[:8], cfg, "", f"method settings hash {cfg}; eval config hash {s.config_hash}"),
+            Cell(s.team or "", (s.team or "").lower()),
             Cell(f"{s.n_objects} ({s.n_failed_objects} failed)", s.n_failed_objects, "n"),
+            Cell("?" if s.completion is None else f"{100 * s.completion:.0f} %", s.completion, "n",
+                 "objects that are not null"),
             Cell(_date(s.created_at), s.created_at)]
 
 
+def pen_cell(s: SubmissionRow, category: str, key: str, best: float | None) -> Cell:
+    """The penalised mean, the paper-convention mean and the completion in its tooltip; ``best`` class when
+    it equals the column's best value."""
+    info = INFO[key]
+    got = s.agg.get(category, {}).get(key)
+    if got is None:
+        return Cell("·", None, "n", "not evaluated")
+    v, n, nf = got
+    pv, comp = s.pen.get(category, {}).get(key, (None, None))
+    paper = metric_cell(info, v, nf, n).text
+    if pv is None:
+        if not n and not nf:
+            return Cell("–", None, "n", "not applicable")
+        return Cell("?", None, "n", f"no penalised mean recorded (paper convention {paper})")
+    scale = 100 if info.percent else 1
+    fmt = ".1f" if info.percent or key == "psnr" else ".3f"
+    tip = (f"penalised mean (failures at the worst value); paper convention {paper}"
+           + ("" if comp is None else f"; completion {100 * comp:.0f} %"))
+    cls = "n" + (" best" if best is not None and pv == best else "") + (" fail" if nf else "")
+    return Cell(f"{pv * scale:{fmt}}", pv * scale, cls, tip)
+
+
+def _best(subs: list[SubmissionRow], category: str, key: str) -> float | None:
+    vals = [v for v in (pen_value(s, category, key) for s in subs) if v is not None]
+    if not vals:
+        return None
+    return max(vals) if INFO[key].higher_better else min(vals)
+
+
 def ranking_table(subs: list[SubmissionRow], category: str, metrics: list[str], table_id: str = "") -> str:
-    heads = ["Method", "Team", "Objects", "Submitted"] + [header(INFO[k]) for k in metrics]
-    rows = [_row_head(s, "") + [agg_cell(s.agg, category, k) for k in metrics] for s in subs]
+    """Ranked rows (:func:`rank_subs`): rank, method, run label, config hash, completion, then the penalised
+    mean of every metric, the best value of each column highlighted."""
+    heads = ["Rank", "Method", "Run", "Config", "Team", "Objects", "Completion", "Submitted"] + [
+        header(INFO[k]) for k in metrics]
+    best = {k: _best(subs, category, k) for k in metrics}
+    rows = []
+    for i, (score, s) in enumerate(rank_subs(subs, category, metrics)):
+        rank = Cell(str(i + 1), i + 1, "n", "" if score is None else f"mean rank over the metrics {score:.2f}")
+        rows.append([rank] + _row_head(s) + [pen_cell(s, category, k, best[k]) for k in metrics])
     return table(heads, rows, table_id=table_id)
 
 
@@ -99,14 +169,23 @@ def paper_style_table(subs: list[SubmissionRow], metrics: list[str]) -> str:
     return table(heads, rows, sortable=False)
 
 
-def leaderboard_sections(subs: list[SubmissionRow], prefix: str = "") -> str:
-    """The computed part of index.html (also the live page's body)."""
+def leaderboard_sections(subs: list[SubmissionRow], prefix: str = "", all_runs: bool = False) -> str:
+    """The computed part of index.html (also the live page's body); ``all_runs``: every run of each method,
+    not only its best one."""
     if not subs:
         return "<p>No scored submissions yet.</p>"
     metrics = present_metrics(subs)
-    parts = ['<p class="note">One row per method and track: its newest submission (all submissions are on the '
-             f'<a href="{prefix}methods.html">method pages</a>).</p>']
-    for ds, tracks in group_subs(subs, latest_only=True).items():
+    rows = ("One row per run (submission)." if all_runs else
+            "One row per method and track: its best-ranked run (every run is on the "
+            f'<a href="{prefix}methods.html">method pages</a>; <code>rsart leaderboard build --all-runs</code> '
+            "lists them all here).")
+    parts = [f'<p class="note">{rows} Rows are ranked by the <strong>penalised mean</strong>: per metric, a '
+             "failed object counts the metric's worst value (0 %, 90° Axis Ang, size-derived caps; "
+             f'<a href="{prefix}metrics.html">metrics</a>), so skipping hard objects never helps; the rank is '
+             "the mean rank over the metrics. Completion = objects not null. The best value of each column is "
+             "highlighted; the tooltip of a cell gives the paper-convention mean (failures left out, "
+             "<code>*</code>) and the metric's completion.</p>"]
+    for ds, tracks in group_subs(subs, all_runs=all_runs).items():
         parts.append(f'<h2>{esc(ds)} <span class="badge computed">computed here</span></h2>')
         for tk, ss in tracks.items():
             tr = Track(**ss[0].track)
@@ -161,9 +240,35 @@ def part_index_means(engine: Engine, ids: list[int]) -> dict[int, dict[str, dict
     return out
 
 
-def comparison_html(t: PaperTable, subs: list[SubmissionRow], parts: dict) -> str:
-    """The paper's table layout: published rows (marked) with our computed rows beside them per metric."""
-    mine = [s for s in subs if any(_our_cats(set(s.agg), col) for col in t.columns if col != "Mean")]
+@dataclass(frozen=True)
+class PaperEvalSet:
+    """What a published table was computed on: ``units`` ("m", or "" for unitless scene units) and the
+    ``objects`` (dataset object ids; None when the paper does not list them)."""
+
+    units: str
+    objects: frozenset[str] | None
+
+
+#: The objects and units of the compared paper tables. The PD²GS paper lists neither its PartNet-Mobility
+#: instances ("two to three instances per category", scene units) nor the ids of RS-Art's 18 objects (metres),
+#: so until they are known no computed row is put beside these published rows.
+PAPER_EVAL_SETS = {"partnet_main": PaperEvalSet("", None), "rsart_main": PaperEvalSet("m", None)}
+
+
+def same_eval_set(s: SubmissionRow, es: PaperEvalSet | None) -> bool:
+    """True when ``s`` was scored on exactly the table's objects, in its units."""
+    return (es is not None and es.objects is not None and s.units is not None and s.units == es.units
+            and s.objects == es.objects)
+
+
+def comparison_html(t: PaperTable, subs: list[SubmissionRow], parts: dict,
+                    eval_set: PaperEvalSet | None = None) -> str:
+    """The paper's table layout: published rows (marked) with our computed rows beside them per metric, for
+    the submissions scored on the same objects in the same units as the table (``eval_set``, default
+    :data:`PAPER_EVAL_SETS`); "" when there is none."""
+    es = eval_set if eval_set is not None else PAPER_EVAL_SETS.get(t.key)
+    mine = [s for s in subs if same_eval_set(s, es)
+            and any(_our_cats(set(s.agg), col) for col in t.columns if col != "Mean")]
     if not mine:
         return ""
     heads = ["Metric", "Method", "Kind"] + list(t.columns)
@@ -202,10 +307,8 @@ def comparison_html(t: PaperTable, subs: list[SubmissionRow], parts: dict) -> st
     return (f'<h3>{esc(t.title)}: paper layout, published rows beside ours</h3>'
             f'<p class="note">Italic rows: <span class="badge published">published</span> in the PD²GS paper '
             f'({esc(t.cite())}), not re-run here. Other rows: <span class="badge computed">computed here</span> on '
-            f'our datasets (categories matched by name; Part Motion in ° for revolute, scene units for prismatic '
-            f'parts). Our rows come from our own datasets (other objects, often in metres, not in the scene units '
-            f'of the paper), so they show the protocol at work, not a re-run of the paper. Published and computed rows are '
-            f'never ranked together.</p>'
+            f'the same objects, in the same units (categories matched by name; Part Motion in ° for revolute, '
+            f'scene units for prismatic parts). Published and computed rows are never ranked together.</p>'
             + table(heads, rows, sortable=False, row_classes=classes))
 
 

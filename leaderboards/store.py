@@ -54,6 +54,13 @@ class SubmissionRow:
     created_at: float
     agg: dict[str, dict[str, tuple[float | None, int, int]]] = field(default_factory=dict)
     scorer_version: str = "0"
+    #: ``pen[category][metric] = (penalised mean|None, completion|None)`` (docs/evaluation.md §4.1)
+    pen: dict[str, dict[str, tuple[float | None, float | None]]] = field(default_factory=dict)
+    run_label: str | None = None
+    run_config_hash: str | None = None
+    units: str | None = None
+    completion: float | None = None
+    objects: frozenset[str] = frozenset()
 
     @property
     def dataset_label(self) -> str:
@@ -61,6 +68,11 @@ class SubmissionRow:
         different scorer versions are never ranked together."""
         return (f"{self.dataset_name} v{self.dataset_version}" + (f" ({self.split})" if self.split else "")
                 + f" · scorer {self.scorer_version}")
+
+    @property
+    def run(self) -> str:
+        """The run's label: the one given, else ``#<submission id>``."""
+        return self.run_label or f"#{self.id}"
 
 
 def _need(doc: dict, path: Path, *keys: str) -> Any:
@@ -113,6 +125,32 @@ def split_metric(name: str) -> tuple[str, str]:
     return name, ("mean" if name in CHAMFER else "")
 
 
+#: Keys of the ``method`` block that name a run rather than configure it (left out of the config hash).
+RUN_LABEL_KEYS = ("run", "run_label")
+
+
+def run_label_of(method: dict) -> str | None:
+    """``method.run`` (or ``method.run_label``) when it is a non-empty string."""
+    for k in RUN_LABEL_KEYS:
+        v = method.get(k)
+        if isinstance(v, str) and v.strip():
+            return v.strip()[:200]
+    return None
+
+
+def run_config_hash(method: dict) -> str:
+    """SHA-256 of the canonical JSON of the ``method`` block without its name and run label: two runs with
+    the same settings (version, inputs, poses, states, options such as PD²GS's ``discovery`` block) share it."""
+    cfg = {k: v for k, v in method.items() if k not in ("name", *RUN_LABEL_KEYS)}
+    return hashlib.sha256(json.dumps(cfg, sort_keys=True, separators=(",", ":"), default=str).encode()).hexdigest()
+
+
+def units_of(doc: dict) -> str:
+    """The scored objects' units: their common ``units`` ("m", or "" for unitless scene units), else "mixed"."""
+    us = {str(r.get("units") or "") for r in doc["objects"].values() if isinstance(r, dict)}
+    return us.pop() if len(us) == 1 else ("mixed" if us else "")
+
+
 def _finite(v: Any) -> float | None:
     return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) else None
 
@@ -145,10 +183,12 @@ def aggregate_rows(doc: dict) -> list[dict]:
     for cat, c in doc["aggregate"]["categories"].items():
         for m, a in c["metrics"].items():
             rows.append(dict(category=cat, metric=m, value=_finite(a.get("mean")), n=int(a.get("n", 0)),
-                             n_failed=int(a.get("n_failed", 0))))
+                             n_failed=int(a.get("n_failed", 0)), penalised=_finite(a.get("penalised_mean")),
+                             completion=_finite(a.get("completion"))))
     for m, a in doc["aggregate"]["overall"]["mean_of_categories"].items():
         rows.append(dict(category=S.MEAN, metric=m, value=_finite(a.get("mean")), n=int(a.get("n_categories", 0)),
-                         n_failed=int(a.get("n_failed", 0))))
+                         n_failed=int(a.get("n_failed", 0)), penalised=_finite(a.get("penalised_mean")),
+                         completion=_finite(a.get("completion"))))
     return rows
 
 
@@ -159,9 +199,11 @@ def _method_id(conn, name: str) -> int:
     return int(conn.execute(insert(S.methods).values(name=name, created_at=time.time())).inserted_primary_key[0])
 
 
-def add_scores(engine: Engine, path: str | Path, *, source: str = "cli", team: str | None = None
-               ) -> tuple[int, bool]:
-    """Ingest a scores folder → (submission id, created). Same scores again → (existing id, False)."""
+def add_scores(engine: Engine, path: str | Path, *, source: str = "cli", team: str | None = None,
+               label: str | None = None) -> tuple[int, bool]:
+    """Ingest a scores folder → (submission id, created). Same scores again → (existing id, False).
+
+    ``label`` names the run (default: the method block's ``run``, else none; pages then show ``#<id>``)."""
     doc, f = read_scores(path)
     key = submission_key(doc)
     with engine.connect() as conn:
@@ -186,7 +228,10 @@ def add_scores(engine: Engine, path: str | Path, *, source: str = "cli", team: s
                 track_states=track.states, track_part_count=track.part_count, track_inputs=track.inputs,
                 n_objects=int(overall.get("n_objects", len(doc["objects"]))),
                 n_failed_objects=int(overall.get("n_failed_objects", 0)), team=team, source=source,
-                created_at=time.time())).inserted_primary_key[0]
+                created_at=time.time(), run_label=(label.strip()[:200] if label and label.strip() else None)
+                or run_label_of(method), run_config_hash=run_config_hash(method), units=units_of(doc),
+                completion=_finite(overall.get("completion"))
+                if "completion" in overall else _completion(overall, doc))).inserted_primary_key[0]
             rows = score_rows(doc)
             if rows:
                 conn.execute(insert(S.scores), [dict(r, submission_id=sid) for r in rows])
@@ -200,15 +245,27 @@ def add_scores(engine: Engine, path: str | Path, *, source: str = "cli", team: s
     return int(sid), True
 
 
+def _completion(overall: dict, doc: dict) -> float | None:
+    n = int(overall.get("n_objects", len(doc["objects"])))
+    return (n - int(overall.get("n_failed_objects", 0))) / n if n else None
+
+
 def list_submissions(engine: Engine) -> list[SubmissionRow]:
     """Every submission with its aggregates, oldest first."""
     with engine.connect() as conn:
         subs = conn.execute(select(S.submissions).order_by(S.submissions.c.id)).mappings().all()
         aggs = conn.execute(select(S.aggregates.c.submission_id, S.aggregates.c.category, S.aggregates.c.metric,
-                                   S.aggregates.c.value, S.aggregates.c.n, S.aggregates.c.n_failed)).all()
+                                   S.aggregates.c.value, S.aggregates.c.n, S.aggregates.c.n_failed,
+                                   S.aggregates.c.penalised, S.aggregates.c.completion)).all()
+        objs = conn.execute(select(S.scores.c.submission_id, S.scores.c.object_id).distinct()).all()
     by: dict[int, dict] = {}
-    for sid, cat, m, v, n, nf in aggs:
+    pen: dict[int, dict] = {}
+    for sid, cat, m, v, n, nf, pv, comp in aggs:
         by.setdefault(sid, {}).setdefault(cat, {})[m] = (v, n, nf)
+        pen.setdefault(sid, {}).setdefault(cat, {})[m] = (pv, comp)
+    objects: dict[int, set[str]] = {}
+    for sid, oid in objs:
+        objects.setdefault(sid, set()).add(oid)
     out = []
     for s in subs:
         out.append(SubmissionRow(
@@ -218,7 +275,9 @@ def list_submissions(engine: Engine) -> list[SubmissionRow]:
             split=s["split"], track={"camera_poses": s["track_camera_poses"], "states": s["track_states"],
                                      "part_count": s["track_part_count"], "inputs": s["track_inputs"]},
             n_objects=s["n_objects"], n_failed_objects=s["n_failed_objects"], source=s["source"],
-            created_at=s["created_at"], agg=by.get(s["id"], {}), scorer_version=s["scorer_version"]))
+            created_at=s["created_at"], agg=by.get(s["id"], {}), scorer_version=s["scorer_version"],
+            pen=pen.get(s["id"], {}), run_label=s["run_label"], run_config_hash=s["run_config_hash"],
+            units=s["units"], completion=s["completion"], objects=frozenset(objects.get(s["id"], ()))))
     return out
 
 

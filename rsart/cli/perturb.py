@@ -1,9 +1,16 @@
-"""``rsart perturb OBJECT --rot-deg U --trans V --seed S --out COPY [--poses gt|colmap]`` (rsart.perturb)."""
+"""``rsart perturb-poses OBJECT --rot-deg U --trans V --seed S --out COPY [--poses gt|colmap]`` (rsart.perturb).
+
+Camera poses only; joints are perturbed by ``rsart-eval --make-gt-submission --perturb-joints``. The old
+name ``rsart perturb`` still works and prints a deprecation warning."""
 from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
+
+NAME = "perturb-poses"
+OLD_NAME = "perturb"  # deprecated alias (until 0.3): it was easy to confuse with rsart-eval's joint perturbation
 
 DESCRIPTION = """\
 Copy an object folder with noisy or estimated camera poses, so any method can be run under pose
@@ -18,7 +25,8 @@ The copy records what was done in meta.json ("camera_poses") and every cameras.j
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("perturb", help="copy an object with noisy or COLMAP camera poses",
+    p = sub.add_parser(NAME, aliases=[OLD_NAME],
+                       help=f"copy an object with noisy or COLMAP camera poses ('{OLD_NAME}' is a deprecated alias)",
                        description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("object", type=Path, help="object folder (meta.json + states/)")
     p.add_argument("--rot-deg", type=float, default=0.0, help="rotation noise sigma per axis, degrees (default 0)")
@@ -32,6 +40,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def _run(args) -> int:
     from ..perturb import perturb_object
+
+    if getattr(args, "command", None) == OLD_NAME:
+        print(f"warning: 'rsart {OLD_NAME}' is deprecated; use 'rsart {NAME}' (camera poses). Joints are perturbed "
+              "by 'rsart-eval --make-gt-submission --perturb-joints'.", file=sys.stderr)
 
     summary = perturb_object(args.object, args.out, args.rot_deg, args.trans, args.seed, args.poses, args.overwrite)
     print(json.dumps(summary, indent=2))

@@ -2,7 +2,7 @@
 
     rsart-eval SUBMISSION --data ROOT [--split NAME] [--out DIR] [--states start,end|all] [--workers N]
     rsart-eval SUBMISSION --data ROOT --validate-only
-    rsart-eval --make-gt-submission --data ROOT --out DIR [--perturb axis=5deg,pivot=0.02,motion=3deg,seed=0]
+    rsart-eval --make-gt-submission --data ROOT --out DIR [--perturb-joints axis=5deg,pivot=0.02,motion=3deg,seed=0]
 
 Exit codes: 0 scored / valid / written; 2 invalid submission, data or usage (every problem is listed
 with its JSON path, no traceback); 1 an unexpected internal error.
@@ -17,13 +17,15 @@ from pathlib import Path
 from ..errors import Problem, RsartError
 
 DESCRIPTION = """\
-Score an articulated-object reconstruction submission (rsart-submission/1, DESIGN §6.2) against the
+Score an articulated-object reconstruction submission (rsart-submission/1, docs/evaluation.md §1) against the
 ground-truth twins of an RS-Art dataset, with the literature's metrics (PARIS -> DTArt -> ArtGS):
 Chamfer CD-s/CD-m/CD-w (x1000, squared distance units), Axis Ang (deg), Axis Pos (x10 scene units,
 revolute only), Part Motion (deg for revolute, scene units for prismatic), joint-type and part-count
-accuracy, and PSNR/SSIM/part-mask scores when renders or masks are submitted.
+accuracy, and PSNR/SSIM/part-mask scores when renders or masks are submitted. Each mean comes as in the
+papers (failures left out, marked *), as a penalised mean (a failure counts the metric's worst value) and
+with a completion rate.
 Joint axis/origin in a submission are in the object's world frame at the eval 'start' state.
-Formulas and conventions: docs/evaluation.md."""
+Submission format, formulas and conventions: docs/evaluation.md (in the rsart repository)."""
 
 
 def _mb(s: str) -> int:
@@ -84,8 +86,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--chamfer-seeds", type=_seeds, default=None, help="sampling seeds (default 0,1,2)")
     p.add_argument("--make-gt-submission", action="store_true",
                    help="write the ground truth as a submission folder at --out (meshes + joints)")
-    p.add_argument("--perturb", metavar="SPEC",
-                   help="with --make-gt-submission: perturb joints, e.g. axis=5deg,pivot=0.02,motion=3deg,travel=0.01,seed=0")
+    p.add_argument("--perturb-joints", metavar="SPEC",
+                   help="with --make-gt-submission: perturb the joints, e.g. "
+                        "axis=5deg,pivot=0.02,motion=3deg,travel=0.01,seed=0 (camera poses: rsart perturb-poses)")
+    p.add_argument("--perturb", dest="perturb_old", metavar="SPEC", help="deprecated spelling of --perturb-joints")
     p.add_argument("--overwrite", action="store_true", help="with --make-gt-submission: replace an existing --out")
     return p
 
@@ -195,20 +199,26 @@ def _make_gt(args) -> int:
 
     if args.data is None or args.out is None:
         raise RsartError("--make-gt-submission needs --data ROOT and --out DIR")
-    pert = parse_perturbation(args.perturb) if args.perturb else None
+    pert = parse_perturbation(args.perturb_joints) if args.perturb_joints else None
     gt = load_ground_truth(args.data, args.split)
     path = make_gt_submission(gt, args.out, args.states, pert, overwrite=args.overwrite)
-    print(f"wrote {path} ({len(gt.objects)} objects{', perturbed: ' + args.perturb if pert else ''})")
+    print(f"wrote {path} ({len(gt.objects)} objects{', perturbed: ' + args.perturb_joints if pert else ''})")
     return 0
 
 
 def run(args) -> int:
+    if args.perturb_old is not None:
+        if args.perturb_joints is not None:
+            raise RsartError("give --perturb-joints only (--perturb is its deprecated spelling)")
+        print("warning: --perturb is deprecated; use --perturb-joints (camera poses: rsart perturb-poses)",
+              file=sys.stderr)
+        args.perturb_joints = args.perturb_old
     if args.make_gt_submission:
         return _make_gt(args)
     if args.submission is None:
         raise RsartError("give the SUBMISSION file (or --make-gt-submission)")
-    if args.perturb:
-        raise RsartError("--perturb only goes with --make-gt-submission")
+    if args.perturb_joints:
+        raise RsartError("--perturb-joints only goes with --make-gt-submission")
     if args.validate_only:
         sub, gt, problems = validate(args, check_meshes=True, workers=args.workers)
         if problems:

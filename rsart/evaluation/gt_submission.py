@@ -51,17 +51,17 @@ def parse_perturbation(spec: str) -> Perturbation:
     kw: dict[str, float | int] = {}
     for tok in filter(None, (t.strip() for t in spec.split(","))):
         if "=" not in tok:
-            raise RsartError(f"--perturb: {tok!r} is not key=value (keys: {', '.join(keys)})")
+            raise RsartError(f"--perturb-joints: {tok!r} is not key=value (keys: {', '.join(keys)})")
         k, v = (x.strip() for x in tok.split("=", 1))
         if k not in keys:
-            raise RsartError(f"--perturb: unknown key {k!r} (keys: {', '.join(keys)})")
+            raise RsartError(f"--perturb-joints: unknown key {k!r} (keys: {', '.join(keys)})")
         v = v[:-3] if v.endswith("deg") else v
         try:
             x = float(v)
         except ValueError:
-            raise RsartError(f"--perturb: {k}={v!r} is not a number") from None
+            raise RsartError(f"--perturb-joints: {k}={v!r} is not a number") from None
         if not math.isfinite(x) or (k != "seed" and x < 0):
-            raise RsartError(f"--perturb: {k} must be a finite non-negative number")
+            raise RsartError(f"--perturb-joints: {k} must be a finite non-negative number")
         kw[keys[k]] = int(x) if k == "seed" else x
     return Perturbation(**kw)
 

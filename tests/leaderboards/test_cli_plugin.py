@@ -54,3 +54,13 @@ def test_broken_plugin_is_reported_not_fatal(tmp_path):
     r = subprocess.run([PY, "-m", "rsart", "--help"], capture_output=True, text=True, cwd=REPO, env=e)
     assert r.returncode == 0
     assert "rsart.commands plug-in 'leaderboard'" in r.stderr and "failed" in r.stderr
+
+
+def test_rsart_leaderboard_usage_names_the_script():
+    r = subprocess.run([PY, "-m", "leaderboards.cli", "--help"], capture_output=True, text=True, cwd=REPO, env=env(),
+                       timeout=120)
+    assert r.returncode == 0 and r.stdout.startswith("usage: rsart-leaderboard [-h] ACTION")
+    assert "rsart-leaderboard leaderboard" not in r.stdout
+    r = subprocess.run([PY, "-m", "leaderboards.cli", "build", "--help"], capture_output=True, text=True, cwd=REPO,
+                       env=env(), timeout=120)
+    assert r.stdout.startswith("usage: rsart-leaderboard build") and "--all-runs" in r.stdout

@@ -121,3 +121,24 @@ def test_sqlite_runs_in_wal_mode(tmp_path):
     eng = open_engine(str(tmp_path / "w.db"))
     with eng.connect() as c:
         assert c.exec_driver_sql("PRAGMA journal_mode").scalar().lower() == "wal"
+
+
+def test_penalised_means_run_label_and_an_older_store_gets_the_new_columns(scored, tmp_path):
+    from sqlalchemy import text
+
+    db = str(tmp_path / "lb.db")
+    eng = open_engine(db)
+    with eng.begin() as c:  # a store written before these columns existed
+        for t, cols in (("aggregates", ("penalised", "completion")),
+                        ("submissions", ("run_label", "run_config_hash", "units", "completion"))):
+            for col in cols:
+                c.execute(text(f"ALTER TABLE {t} DROP COLUMN {col}"))
+    eng.dispose()
+    eng = open_engine(db)  # adds them back
+    add_scores(eng, scored["failed"], label="first try")
+    s = list_submissions(eng)[0]
+    doc = json.loads((scored["failed"] / "scores.json").read_text())
+    mc = doc["aggregate"]["overall"]["mean_of_categories"]
+    assert s.pen[S.MEAN]["axis_ang"] == (mc["axis_ang"]["penalised_mean"], mc["axis_ang"]["completion"])
+    assert s.pen[S.MEAN]["axis_ang"][0] == pytest.approx(45.0, abs=1e-6)  # (door null: 90 + drawer 0) / 2
+    assert s.completion == 0.5 and s.run == "first try" and len(s.run_config_hash) == 64

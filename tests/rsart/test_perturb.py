@@ -81,9 +81,14 @@ def test_bad_input(captured, tmp_path, capsys):
     perturb_object(captured, tmp_path / "once", 1.0, 0.0)
     with pytest.raises(RsartError, match="already exists"):
         perturb_object(captured, tmp_path / "once", 1.0, 0.0)
-    assert main(["perturb", str(captured), "--trans", "nan", "--out", str(tmp_path / "n")]) == 2
+    assert main(["perturb-poses", str(captured), "--trans", "nan", "--out", str(tmp_path / "n")]) == 2
     assert "--trans" in capsys.readouterr().err
-    assert main(["perturb", str(captured), "--rot-deg", "1", "--trans", "0.02", "--out", str(tmp_path / "ok")]) == 0
+    assert main(["perturb-poses", str(captured), "--rot-deg", "1", "--trans", "0.02", "--out", str(tmp_path / "ok")]) == 0
+    assert "deprecated" not in capsys.readouterr().err
+    # the old name still works, with a warning that names the new one
+    assert main(["perturb", str(captured), "--rot-deg", "1", "--out", str(tmp_path / "old")]) == 0
+    err = capsys.readouterr().err
+    assert "'rsart perturb' is deprecated" in err and "rsart perturb-poses" in err
 
 
 def test_uncaptured_object_is_refused(cabinet_dir, tmp_path):

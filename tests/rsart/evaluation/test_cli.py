@@ -44,14 +44,22 @@ def test_make_gt_submission_then_score_it(dataset, tmp_path):
     assert (objs["axis_ang"].abs() < 1e-9).all()
     md = (out / "summary.md").read_text()
     table = md.split("| Metric")[1].split("\n\n")[0]
-    assert "| Metric | lamp | storage | Mean |" in md and not re.search(r"\d\*|\| \* \|", table)
+    assert "| Metric | lamp | storage | Mean | Penalised mean | Completion |" in md
+    assert not re.search(r"\d\*|\| \* \|", table) and "| 100 % |" in table
     assert (out / "summary.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
 def test_perturbed_submission_via_cli(dataset, tmp_path):
     r = run("--make-gt-submission", "--data", dataset, "--split", "lamps", "--out", tmp_path / "p",
-            "--perturb", "axis=5deg,seed=3")
+            "--perturb-joints", "axis=5deg,seed=3")
     assert r.returncode == 0, r.stderr
+    assert "deprecated" not in r.stderr
+    # the old spelling still works and says so
+    old = run("--make-gt-submission", "--data", dataset, "--split", "lamps", "--out", tmp_path / "p_old",
+              "--perturb", "axis=5deg,seed=3")
+    assert old.returncode == 0 and "--perturb is deprecated; use --perturb-joints" in old.stderr
+    assert (json.loads((tmp_path / "p_old" / "submission.json").read_text())
+            == json.loads((tmp_path / "p" / "submission.json").read_text()))
     out = tmp_path / "o"
     r = run(tmp_path / "p" / "submission.json", "--data", dataset, "--split", "lamps", "--out", out,
             "--workers", "1", "--chamfer-samples", "1000", "--chamfer-seeds", "0")
@@ -72,3 +80,10 @@ def test_invalid_submissions_exit_2_without_traceback(dataset, tmp_path):
         assert f"results.{oid}: missing object" in r.stderr
     r = run("validate-submission", bad, "--data", dataset, module="rsart")
     assert r.returncode == 2 and "results.lamp-0000: missing object" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_help_points_to_the_docs_not_the_design_notes():
+    r = run("--help")
+    assert r.returncode == 0 and "docs/evaluation.md" in r.stdout and "DESIGN" not in r.stdout
+    assert "--perturb-joints" in r.stdout
+
