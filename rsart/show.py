@@ -2,8 +2,11 @@
 
 ``show_twin`` draws every state of an object (from its meta.json, or the RS-Art protocol
 states for an in-memory twin) as a matplotlib 3-D mesh plot (Poly3DCollection, Lambert-shaded
-faces coloured per part), with each joint's axis drawn as an arrow through its origin, all
-panels sharing one metric bounding box. World frame, z up, metres.
+faces coloured per part), all panels sharing one bounding box (world frame, z up, the object's
+units). The viewpoint is chosen from the object (:func:`choose_view`): a three-quarter view of the
+side its parts move towards. Joint axes are drawn on top of the meshes (never hidden), through
+their moving part, with a length scaled to that part; a legend names each part colour and the
+axis styles.
 """
 from __future__ import annotations
 
@@ -52,37 +55,139 @@ def _display_triangles(mesh, max_edge: float) -> tuple[np.ndarray, np.ndarray]:
         return mesh.vertices[mesh.faces], normals
 
 
-def _draw(ax, twin: Twin, values: dict[str, float], lims: np.ndarray, axis_len: float) -> None:
+AXIS_STYLE = {"revolute": dict(color="#d00000", label="revolute axis"),
+              "prismatic": dict(color="#7a00c4", label="prismatic axis (direction of travel)")}
+
+
+def _joint_span(j) -> tuple[float, float]:
+    """(from, to) values to probe a joint's motion: its limits, or a quarter turn from 0 without limits."""
+    if j.limits is not None:
+        return float(j.limits[0]), float(j.limits[1])
+    return 0.0, math.pi / 2
+
+
+def _front_vector(twin: Twin, rest: dict[str, float]) -> np.ndarray:
+    """Horizontal (x, y) direction that the object's parts move towards (zero if none stands out).
+
+    Per movable part, from ``rest`` with only its joint moved across its span: a prismatic part contributes
+    its centroid's displacement; a part turning about a horizontal axis the direction from the hinge to its
+    centroid (a lid hinged at the back points to the front), or its displacement when the hinge lies under
+    its centroid (an oven door); a part turning about a near-vertical axis (a door) the direction its
+    centroid starts to move in (out of the door's plane). Each contribution is a unit vector weighted by the
+    part's size, so knobs spinning in place count little. When the contributions cancel out (two eyeglass
+    legs folding towards each other) the displacements of all parts decide instead; when those cancel too
+    (a box with four flaps) the result is zero."""
+    start = twin.posed_meshes(rest)
+    first, disp, weights = np.zeros(2), np.zeros(2), 0.0
+    for j in twin.joints:
+        lo, hi = _joint_span(j)
+        frm = {**rest, j.name: lo}
+        c0 = twin.posed_meshes(frm)[j.child].centroid
+        c1 = twin.posed_meshes({**rest, j.name: hi})[j.child].centroid
+        size = float(np.linalg.norm(start[j.child].extents))
+        d = (c1 - c0)[:2]
+        vec = d
+        if j.type == "revolute":
+            o, ax = twin.posed_axes(frm)[j.name]
+            r = c0 - o
+            r = r - ax * float(r @ ax)  # hinge -> centroid, perpendicular to the axis
+            if abs(float(ax[2])) >= 0.7:
+                vec = (np.cross(ax, r) * np.sign(hi - lo))[:2]  # the centroid's velocity as it starts to open
+            elif np.linalg.norm(r[:2]) > 0.25 * max(np.linalg.norm(r), 1e-12):
+                vec = r[:2]
+        tiny = 1e-3 * max(size, 1e-12)
+        if np.linalg.norm(vec) > tiny:
+            first += vec / np.linalg.norm(vec) * size
+        if np.linalg.norm(d) > tiny:
+            disp += d / np.linalg.norm(d) * size
+        weights += size
+    for total in (first, disp):
+        if weights > 0 and np.linalg.norm(total) > 0.3 * weights:  # the parts agree on a side
+            return total
+    return np.zeros(2)
+
+
+def choose_view(twin: Twin, rest: dict[str, float] | None = None) -> tuple[float, float]:
+    """(elevation, azimuth) in degrees for matplotlib's ``view_init``: 30° to the side of the direction the
+    parts move towards (:func:`_front_vector`), 25° up (35° when a part turns about a horizontal axis, so
+    the inside of a box under its lid shows). Falls back to (25, -55) when no direction stands out."""
+    if rest is None:
+        rest = {j.name: float(np.clip(0.0, *sorted(_joint_span(j)))) for j in twin.joints}
+    f = _front_vector(twin, rest)
+    lids = any(j.type == "revolute" and abs(float(j.axis[2])) < 0.7 for j in twin.joints)
+    elev = 35.0 if lids else 25.0
+    if float(np.linalg.norm(f)) < 1e-9:
+        return elev, -55.0
+    return elev, math.degrees(math.atan2(f[1], f[0])) + 30.0
+
+
+def _draw(ax, twin: Twin, values: dict[str, float], lims: np.ndarray, view: tuple[float, float]) -> None:
+    from matplotlib import patheffects
     from matplotlib.colors import to_rgb
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
     tris, cols = [], []
-    max_edge = float(np.max(lims[1] - lims[0])) / 12
-    for i, m in enumerate(twin.posed_meshes(values)):
+    size = float(np.max(lims[1] - lims[0]))
+    max_edge = size / 12
+    meshes = twin.posed_meshes(values)
+    for i, m in enumerate(meshes):
         base = np.asarray(to_rgb(PART_COLORS[i % len(PART_COLORS)]))
         t, n = _display_triangles(m, max_edge)
         tris.append(t)
         cols.append(_shaded(np.broadcast_to(base, (len(t), 3)), n))
-    pc = Poly3DCollection(np.concatenate(tris), facecolors=np.concatenate(cols), edgecolors="none", linewidths=0)
+    ax.computed_zorder = False  # draw order = zorder: the axes below always come after the meshes
+    pc = Poly3DCollection(np.concatenate(tris), facecolors=np.concatenate(cols), edgecolors="none", linewidths=0,
+                          zorder=1)
     ax.add_collection3d(pc)
-    for name, (o, a) in twin.posed_axes(values).items():
-        p0 = o - a * axis_len * 0.5
-        ax.quiver(*p0, *(a * axis_len), color="red", linewidth=1.8, arrow_length_ratio=0.18)
+    outline = [patheffects.withStroke(linewidth=4.2, foreground="white")]
+    for j in twin.joints:
+        o, a = twin.posed_axes(values)[j.name]
+        part = meshes[j.child]
+        c = part.centroid
+        # through the moving part: the revolute axis at the point nearest the part's centroid, the
+        # prismatic axis through the centroid; as long as the part along the axis (a door's height, a
+        # lid's width), within 12-45 % of the object
+        p = o + a * float((c - o) @ a) if j.type == "revolute" else c
+        along = float(np.ptp(part.vertices @ a))
+        length = float(np.clip(1.3 * along, 0.12 * size, 0.45 * size))
+        st = AXIS_STYLE.get(j.type, AXIS_STYLE["revolute"])
+        p0 = p - a * length * (0.5 if j.type == "revolute" else 0.0)
+        q = ax.quiver(*p0, *(a * length), color=st["color"], linewidth=2.2, arrow_length_ratio=0.22, zorder=10)
+        q.set_path_effects(outline)
     ax.set_xlim(*lims[:, 0])
     ax.set_ylim(*lims[:, 1])
     ax.set_zlim(*lims[:, 2])
-    ax.set_box_aspect(lims[1] - lims[0])
-    ax.view_init(elev=25, azim=-55)
+    ax.set_box_aspect(lims[1] - lims[0], zoom=0.9)
+    ax.view_init(elev=view[0], azim=view[1])
     ax.set_axis_off()
 
 
+def _plural(n: int, word: str) -> str:
+    return f"{n} {word}{'' if n == 1 else 's'}"
+
+
+def _legend_handles(twin: Twin):
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    handles = []
+    for i, p in enumerate(twin.parts):
+        what = "static" if i == 0 else twin.joint_of_part(i).type
+        handles.append(Patch(facecolor=PART_COLORS[i % len(PART_COLORS)], label=f"{p.name} ({what})"))
+    for t in sorted({j.type for j in twin.joints}):
+        st = AXIS_STYLE.get(t, AXIS_STYLE["revolute"])
+        handles.append(Line2D([], [], color=st["color"], linewidth=2.2, label=st["label"]))
+    return handles
+
+
 def show_twin(obj_dir_or_twin: str | Path | Twin, out_png: str | Path, states: list[str] | None = None,
-              dpi: int = 90, title: str | None = None) -> Path:
+              dpi: int = 90, title: str | None = None, view: tuple[float, float] | None = None) -> Path:
     """Write a contact sheet PNG of the twin in each state to ``out_png``; returns its path.
 
     ``obj_dir_or_twin``: an object folder (meta.json + twin) or a :class:`Twin`;
     ``states``: state ids to draw (default: all of the object's states; for a bare Twin the
-    RS-Art protocol states m0..m3 + single min/max).
+    RS-Art protocol states m0..m3 + single min/max); ``view``: (elevation, azimuth) in degrees
+    (default :func:`choose_view`).
     """
     import matplotlib
 
@@ -103,17 +208,26 @@ def show_twin(obj_dir_or_twin: str | Path | Twin, out_png: str | Path, states: l
     lo, hi = boxes[:, 0].min(0), boxes[:, 1].max(0)
     pad = 0.06 * float(np.max(hi - lo))
     lims = np.array([lo - pad, hi + pad])
-    axis_len = 0.25 * float(np.max(hi - lo))
+    view = view if view is not None else choose_view(twin, dict(all_states[0].values))
     ncols = min(4, len(all_states))
     nrows = math.ceil(len(all_states) / ncols)
-    fig = plt.figure(figsize=(3.2 * ncols, 3.2 * nrows + 0.4))
+    handles = _legend_handles(twin)
+    leg_cols = min(len(handles), max(2, ncols * 2))
+    leg_h = 0.28 * math.ceil(len(handles) / leg_cols) + 0.15  # inches
+    title_h = 0.45  # inches for the title, above the panel titles
+    height = 3.2 * nrows + title_h + leg_h
+    fig = plt.figure(figsize=(3.2 * ncols, height))
     for k, s in enumerate(all_states):
         ax = fig.add_subplot(nrows, ncols, k + 1, projection="3d")
-        _draw(ax, twin, s.values, lims, axis_len)
+        _draw(ax, twin, s.values, lims, view)
         label = s.id if s.kind == "multi" else f"{s.id} ({s.joint} {s.extreme})"
-        ax.set_title(label, fontsize=8)
-    fig.suptitle(title or f"{name}: {len(twin.parts) - 1} movable parts, {len(twin.joints)} joints", fontsize=10)
-    fig.subplots_adjust(left=0, right=1, bottom=0, top=0.92, wspace=0, hspace=0.08)
+        ax.set_title(label, fontsize=8, pad=0)
+    n_mov = len(twin.parts) - 1
+    fig.suptitle(title or f"{name}: {_plural(n_mov, 'movable part')}, {_plural(len(twin.joints), 'joint')}",
+                 fontsize=10, y=1 - 0.12 / height, va="top")
+    fig.legend(handles=handles, loc="lower center", ncol=leg_cols, fontsize=7, frameon=False,
+               bbox_to_anchor=(0.5, 0.02 / height))
+    fig.subplots_adjust(left=0, right=1, bottom=leg_h / height, top=1 - title_h / height, wspace=0, hspace=0.08)
     import io
 
     buf = io.BytesIO()

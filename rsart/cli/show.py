@@ -9,8 +9,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "show", help="draw a twin in each interaction state (contact sheet PNG)",
         description="Draw OBJECT (an object folder with meta.json and twin/) in each of its states, parts in "
-                    "distinct colours and joint axes as red arrows, into one PNG. Alternatively draw a "
-                    "procedural instance directly with --category/--seed. World frame, z up, metres.")
+                    "distinct colours (with a legend) and joint axes drawn on top (revolute red, prismatic "
+                    "purple), into one PNG. The camera looks at the side the parts move towards (--view "
+                    "overrides it). Alternatively draw a procedural instance directly with --category/--seed. "
+                    "World frame, z up, the object's units.")
     p.add_argument("object", type=Path, nargs="?", help="object folder")
     p.add_argument("--category", help="draw the procedural CATEGORY instance instead of a folder")
     p.add_argument("--seed", type=int, default=0)
@@ -18,10 +20,24 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--states", default=None, help="comma-separated state ids (default: all)")
     p.add_argument("--out", type=Path, required=True, help="output PNG")
     p.add_argument("--dpi", type=int, default=90)
+    p.add_argument("--view", type=_view, metavar="ELEV,AZIM",
+                   help="camera elevation and azimuth in degrees (default: chosen from the object)")
     p.add_argument("--views", action="store_true",
                    help="draw the rendered views instead (per captured state: RGB | depth colour-mapped | mask, "
                         "joint axes projected); needs states rendered with `rsart render`")
     p.set_defaults(func=_show)
+
+
+def _view(s: str) -> tuple[float, float]:
+    import math
+
+    try:
+        elev, azim = (float(x) for x in s.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{s!r} is not ELEV,AZIM (two numbers in degrees)") from None
+    if not (math.isfinite(elev) and math.isfinite(azim)):
+        raise argparse.ArgumentTypeError(f"{s!r}: the angles must be finite")
+    return elev, azim
 
 
 def _show(args) -> int:
@@ -44,6 +60,6 @@ def _show(args) -> int:
 
         print(render_sheet(args.object, args.out))
         return 0
-    out = show_twin(target, args.out, states=states, dpi=args.dpi)
+    out = show_twin(target, args.out, states=states, dpi=args.dpi, view=args.view)
     print(out)
     return 0
