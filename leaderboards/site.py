@@ -357,12 +357,17 @@ def method_plot(s: SubmissionRow, metrics: list[str]) -> bytes:
     for ax, k in zip(axes.flat, keys):
         info = INFO[k]
         vals = [s.agg[c].get(k, (None, 0, 0)) for c in cats]
-        ys = [(v[0] or 0.0) * (100 if info.percent else 1) for v in vals]
-        bars = ax.bar(range(len(cats)), ys, color="#4a7db5")
-        for b, v in zip(bars, vals):
-            if v[2]:
+        xs = [i for i, v in enumerate(vals) if v[0] is not None]  # no 0-height bar for a missing value
+        bars = ax.bar(xs, [vals[i][0] * (100 if info.percent else 1) for i in xs], color="#4a7db5")
+        for b, i in zip(bars, xs):
+            if vals[i][2]:
                 b.set_hatch("//")
                 b.set_edgecolor("#a00")
+        for i, v in enumerate(vals):
+            if v[0] is None:
+                ax.text(i, 0, "failed" if v[2] else "n/a", rotation=90, ha="center", va="bottom", fontsize=7,
+                        color="#a00" if v[2] else "#777")
+        ax.set_xlim(-0.6, len(cats) - 0.4)
         ax.set_xticks(range(len(cats)), cats, rotation=45, ha="right", fontsize=7)
         ax.set_title(header(info), fontsize=9)
     for ax in list(axes.flat)[len(keys):]:
