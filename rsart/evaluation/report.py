@@ -340,6 +340,14 @@ def summary_plot(scores: dict) -> bytes:
             if v is None:  # "failed" (nothing scored) or "n/a" (not applicable), never a 0-height bar
                 ax.text(i, 0, note, rotation=90, ha="center", va="bottom", fontsize=7,
                         color="#a00" if note == "failed" else "#777")
+        others = [b[1] for b in bars[:-1] if b[1] is not None]
+        pen = bars[-1][1]
+        if pen is not None and others and 0 < max(others) and pen > 3 * max(others):
+            # a penalised mean far above the rest would flatten every other bar: cut its bar, print its value
+            top = 1.3 * max(others)
+            ax.set_ylim(0, top)
+            ax.text(len(bars) - 1, 0.97 * top, f"{pen:.4g} ↑", ha="center", va="top", fontsize=7, color="C2",
+                    bbox=dict(boxstyle="square,pad=0.15", fc="white", ec="none"))
         ax.set_xlim(-0.6, len(bars) - 0.4)
         ax.set_xticks(range(len(bars)), [b[0] for b in bars], rotation=45, ha="right", fontsize=8)
         ax.set_title(f"{m.label}{' (' + _unit_label(m, scores) + ')' if m.unit else ''}", fontsize=9)
