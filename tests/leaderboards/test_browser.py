@@ -65,15 +65,19 @@ def test_static_site_sorts(browser, scored, tmp_path):
     tid = table.get_attribute("id")
     heads = table.find_elements(By.CSS_SELECTOR, "thead th")
     col = next(i for i, h in enumerate(heads) if h.text.startswith("Axis Ang"))
-    methods_before = _column_values(browser, tid, 0)
+    mcol = next(i for i, h in enumerate(heads) if h.text.startswith("Method"))
+    methods_before = _column_values(browser, tid, mcol)
     heads[col].click()
     asc = _column_values(browser, tid, col)
     heads[col].click()
     desc = _column_values(browser, tid, col)
     nums = lambda xs: [float(x.rstrip("*")) for x in xs if x.rstrip("*").replace(".", "").isdigit()]
     assert nums(asc) == sorted(nums(asc)) and nums(desc) == sorted(nums(desc), reverse=True)
-    assert nums(asc)[-1] == pytest.approx(5.0, abs=1e-3)  # the 5°-perturbed submission
-    assert _column_values(browser, tid, 0)[0].startswith("perturbed") and methods_before[0].startswith("perturbed")
+    # penalised means: the submission that nulled the door object counts 90° for it -> (90 + 0) / 2 = 45, worse
+    # than the 5°-perturbed one; ranked first before any click: the ground truth
+    assert nums(asc)[-1] == pytest.approx(45.0, abs=1e-3) and 5.0 in [round(x, 3) for x in nums(asc)]
+    assert _column_values(browser, tid, mcol)[0].startswith("half-failed")
+    assert methods_before[0].startswith("ground-truth") and methods_before[-1].startswith("half-failed")
     assert "published" in browser.find_element(By.TAG_NAME, "body").text
     ARTIFACTS.mkdir(exist_ok=True)
     browser.save_screenshot(str(ARTIFACTS / "leaderboard_static.png"))
