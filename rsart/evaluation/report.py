@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from ..io import atomic_write_bytes, atomic_write_text, write_json
-from .score import OBJECT_METRICS, PART_METRICS
+from .score import IMAGE_METRICS, OBJECT_METRICS, PART_METRICS
 
 
 @dataclass(frozen=True)
@@ -132,12 +132,19 @@ def _metric_failed(res: dict, k: str) -> bool:
     return k in res["failures"] or res.get("part_failures", {}).get(k, 0) > 0
 
 
-def _agg(results: list[dict], k: str) -> dict:
+def _null_counts(r: dict, k: str, images_submitted: set[str]) -> bool:
+    """A null object counts in the completion and penalised mean of an image metric that the submission
+    scored elsewhere (the scorer marks it not applicable: with no result there are no images)."""
+    return k in images_submitted and r["status"] == "failed" and k not in r["metrics"] and not _metric_failed(r, k)
+
+
+def _agg(results: list[dict], k: str, images_submitted: set[str] = frozenset()) -> dict:
     vals = [r["metrics"][k] for r in results if k in r["metrics"]]
     nfail = sum(1 for r in results if _metric_failed(r, k))
-    applies = [r for r in results if k in r["metrics"] or _metric_failed(r, k)]
-    complete = sum(1 for r in applies if not _metric_failed(r, k))
-    pen = [penalised_object_value(r, k) for r in applies]
+    applies = [r for r in results if k in r["metrics"] or _metric_failed(r, k) or _null_counts(r, k, images_submitted)]
+    complete = sum(1 for r in applies if k in r["metrics"] and not _metric_failed(r, k))
+    pen = [penalty_cap(k, None) if _null_counts(r, k, images_submitted) else penalised_object_value(r, k)
+           for r in applies]
     return {"mean": float(np.mean(vals)) if vals else None, "n": len(vals), "n_failed": nfail,
             "n_applicable": len(applies), "completion": complete / len(applies) if applies else None,
             "penalised_mean": float(np.mean(pen)) if pen and all(v is not None for v in pen) else None}
@@ -148,12 +155,13 @@ def aggregate(results: dict[str, dict]) -> dict:
     cats: dict[str, list[dict]] = {}
     for r in results.values():
         cats.setdefault(r["category"], []).append(r)
+    images = {k for k in IMAGE_METRICS for r in results.values() if k in r["metrics"] or k in r["failures"]}
     out_c = {}
     for c in sorted(cats):
         rs = cats[c]
         out_c[c] = {"objects": [r["object_id"] for r in rs], "n_objects": len(rs),
                     "n_failed_objects": sum(r["status"] == "failed" for r in rs),
-                    "metrics": {k: _agg(rs, k) for k in OBJECT_METRICS}}
+                    "metrics": {k: _agg(rs, k, images) for k in OBJECT_METRICS}}
     mean_cat = {}
     for k in OBJECT_METRICS:
         cs = [out_c[c]["metrics"][k] for c in out_c]
@@ -170,7 +178,7 @@ def aggregate(results: dict[str, dict]) -> dict:
     return {"categories": out_c, "overall": {
         "n_objects": len(all_r), "n_failed_objects": n_failed,
         "completion": (len(all_r) - n_failed) / len(all_r) if all_r else None,
-        "mean_of_categories": mean_cat, "objects": {k: _agg(all_r, k) for k in OBJECT_METRICS}}}
+        "mean_of_categories": mean_cat, "objects": {k: _agg(all_r, k, images) for k in OBJECT_METRICS}}}
 
 
 def failure_list(results: dict[str, dict]) -> list[dict]:

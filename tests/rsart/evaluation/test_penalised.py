@@ -124,3 +124,32 @@ def test_summary_plot_draws_no_zero_bar_for_missing_values(nulled):
     assert all(v is None and note == "n/a" for _l, v, note in plot_bars(nulled, "psnr"))
     png = summary_plot(nulled)
     assert png[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_a_null_object_counts_zero_in_image_metrics_the_submission_scored(dataset, tmp_path):
+    """Renders for cabinet-0000 only, cabinet-0001 null: storage PSNR penalised = (PSNR + 0) / 2; the lamp
+    (scored, but no renders) stays not applicable."""
+    import shutil
+
+    from rsart.io import write_png_rgb
+
+    rng = np.random.default_rng(0)
+    rgb = rng.integers(0, 256, (24, 32, 3), dtype=np.uint8)
+    write_png_rgb(dataset / "cabinet-0000" / "states" / "m0" / "rgb" / "0000.png", rgb)
+    out = tmp_path / "img"
+    make_gt_submission(load_ground_truth(dataset), out)
+    write_png_rgb(out / "r.png", np.clip(rgb.astype(int) + 10, 0, 255).astype(np.uint8))
+    f = out / "submission.json"
+    d = json.loads(f.read_text())
+    d["results"]["cabinet-0000"]["renders"] = {"m0": {"0000": "r.png"}}
+    d["results"]["cabinet-0001"] = None
+    f.write_text(json.dumps(d))
+    scores = build_scores(score(f, dataset), config=FAST.to_dict(), config_hash=FAST.hash(), toolkit_version="t",
+                          dataset={"name": "tiny"}, submission={"method": {"name": "m"}})
+    st = scores["aggregate"]["categories"]["storage"]["metrics"]["psnr"]
+    psnr = scores["objects"]["cabinet-0000"]["metrics"]["psnr"]
+    assert st["mean"] == pytest.approx(psnr) and st["n_failed"] == 0          # paper convention: the null drops out
+    assert st["penalised_mean"] == pytest.approx(psnr / 2) and st["completion"] == 0.5
+    lamp = scores["aggregate"]["categories"]["lamp"]["metrics"]["psnr"]
+    assert lamp["n_applicable"] == 0 and lamp["penalised_mean"] is None
+    shutil.rmtree(out)
