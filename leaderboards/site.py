@@ -1,8 +1,9 @@
 """``rsart leaderboard build``: the static site (HTML, Markdown, CSV) from the result store.
 
-Pages: ``index.html`` (per dataset and track: a sortable table of the Mean over categories, a sortable
-table per category, and the paper-style table with ``*`` failure marks; then the paper's layout with our
-computed rows beside the published ones), ``published.html`` (every transcribed table of the PD²GS
+Pages: ``index.html`` (per dataset and track: the runs ranked by the penalised Mean over categories with
+their completion rate, run label and config hash, best value per column highlighted; a ranked table per
+category; the paper-style table with ``*`` failure marks; then the paper's layout, with our computed rows
+beside the published ones only for submissions scored on the paper's objects in its units), ``published.html`` (every transcribed table of the PD²GS
 paper, marked as published and not re-run here), ``metrics.html``, ``methods.html`` and one page per
 method with per-category plots, ``downloads.html``; exports ``leaderboard.md``, ``leaderboard.csv``,
 ``leaderboard_by_category.csv`` and ``published.csv``. Published rows never enter a computed ranking.
@@ -332,9 +333,13 @@ def metrics_page() -> str:
     rows = [[Cell(m.label), Cell(m.unit), Cell("higher" if m.higher_better else "lower"), Cell(m.group),
              Cell(METRIC_TEXT.get(m.key, "Image/mask metric (when renders or masks are submitted)."))] for m in METRICS]
     body = (table(["Metric", "Unit", "Better", "Group", "Definition"], rows, sortable=False)
-            + "<p>Failures are counted and marked <code>*</code>; they never enter a mean as numbers. Category "
-              "values are means over the category's objects; the Mean column is the mean over categories. Full "
-              "definitions: docs/evaluation.md. Tracks: camera poses (gt/estimated), states used (2/N), part "
+            + "<p>Failures are counted and marked <code>*</code>; they never enter the paper-convention mean as "
+              "numbers. Category values are means over the category's objects; the Mean column is the mean over "
+              "categories. The rankings use the <strong>penalised mean</strong> instead, in which a failure counts "
+              "the metric's worst value: 0 % for accuracies, 0 dB / 0 for PSNR / SSIM, 90° Axis Ang, 180° "
+              "revolute Part Motion, and for Axis Pos 10·d, prismatic Part Motion d and every Chamfer 2000·d², "
+              "with d the object's bounding-box diagonal; scored values are clipped to the same caps. Completion = "
+              "objects scored without failure. Full definitions: docs/evaluation.md §4.1. Tracks: camera poses (gt/estimated), states used (2/N), part "
               "count (given/inferred), inputs (RGB/RGB-D), read from the submission's <code>method</code> block.</p>")
     return page("Metric definitions", body)
 
