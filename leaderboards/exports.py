@@ -12,7 +12,7 @@ from sqlalchemy.engine import Engine
 from . import schema as S
 from .html import INFO, esc, page, present_metrics
 from .paper import load_tables
-from .site import (COMPARE_TABLES, _best, _method_label, best_per_method, comparison_html, group_subs,
+from .site import (COMPARE_TABLES, _method_label, best_per_method, best_value, comparison_html, group_subs,
                    leaderboard_sections, method_pages, metrics_page, part_index_means, pen_value,
                    published_table_html, rank_subs)
 from .store import SubmissionRow, list_submissions
@@ -47,7 +47,7 @@ def leaderboard_markdown(subs: list[SubmissionRow], all_runs: bool = False) -> s
     for ds, tracks in group_subs(subs, all_runs=all_runs).items():
         out += [f"## {ds}", ""]
         for _tk, ss in tracks.items():
-            best = {k: _best(ss, S.MEAN, k) for k in metrics}
+            best = {k: best_value(ss, S.MEAN, k) for k in metrics}
             out += [f"### {Track(**ss[0].track).label()}", "",
                     "| Rank | Method | Run | Config | Team | Objects | Completion | "
                     + " | ".join(INFO[k].label for k in metrics) + " |",

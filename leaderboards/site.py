@@ -135,7 +135,8 @@ def pen_cell(s: SubmissionRow, category: str, key: str, best: float | None) -> C
     return Cell(f"{pv * scale:{fmt}}", pv * scale, cls, tip)
 
 
-def _best(subs: list[SubmissionRow], category: str, key: str) -> float | None:
+def best_value(subs: list[SubmissionRow], category: str, key: str) -> float | None:
+    """The best penalised mean of ``key`` in ``category`` among ``subs`` (the highlighted value; None if none)."""
     vals = [v for v in (pen_value(s, category, key) for s in subs) if v is not None]
     if not vals:
         return None
@@ -147,7 +148,7 @@ def ranking_table(subs: list[SubmissionRow], category: str, metrics: list[str], 
     mean of every metric, the best value of each column highlighted."""
     heads = ["Rank", "Method", "Run", "Config", "Team", "Objects", "Completion", "Submitted"] + [
         header(INFO[k]) for k in metrics]
-    best = {k: _best(subs, category, k) for k in metrics}
+    best = {k: best_value(subs, category, k) for k in metrics}
     rows = []
     for i, (score, s) in enumerate(rank_subs(subs, category, metrics)):
         rank = Cell(str(i + 1), i + 1, "n", "" if score is None else f"mean rank over the metrics {score:.2f}")
