@@ -6,4 +6,4 @@ default of :class:`rsart.evaluation.score.EvalConfig`), regenerate the pinned re
 says what moved and by how much on the reference set. tests/rsart/evaluation/test_reference_scores.py
 fails until all three agree. The leaderboard never ranks rows of different scorer versions together.
 """
-SCORER_VERSION = "1"
+SCORER_VERSION = "2"
