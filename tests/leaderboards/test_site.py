@@ -123,7 +123,7 @@ def test_paper_rows_beside_computed_rows_only_for_the_same_objects_and_units(sco
     assert subs[0].objects == frozenset({"drawer-0000", "door-0001"}) and subs[0].units == "m"
     t = get_table("partnet_main")
     same = comparison_html(t, subs, {}, PaperEvalSet("m", frozenset({"drawer-0000", "door-0001"})))
-    assert "computed (tiny v1)" in same and "PARIS" in same
+    assert "computed (tiny v1 · scorer" in same and "PARIS" in same
     assert comparison_html(t, subs, {}, PaperEvalSet("", frozenset({"drawer-0000", "door-0001"}))) == ""  # units
     assert comparison_html(t, subs, {}, PaperEvalSet("m", frozenset({"drawer-0000"}))) == ""  # objects
     assert comparison_html(t, subs, {}) == ""  # the paper's own objects are not listed: never beside
