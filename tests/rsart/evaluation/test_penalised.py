@@ -16,6 +16,7 @@ from rsart.metrics.chamfer import ChamferConfig
 from rsart.twin_io import read_twin
 
 FAST = EvalConfig(chamfer=ChamferConfig(n_samples=2000, seeds=(0,)))
+pytestmark = pytest.mark.core  # runs on the core install alone (.ci/core)
 
 
 def score(path, dataset):
