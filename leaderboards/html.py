@@ -101,9 +101,11 @@ def agg_cell(agg: dict, category: str, key: str) -> Cell:
     return metric_cell(INFO[key], v, nf, n)
 
 
-def header(info: MetricInfo) -> str:
+def header(info: MetricInfo, units: str | None = None) -> str:
+    """Column header; ``units`` "m" writes the unit in metres instead of "units" (scene units)."""
     arrow = "↑" if info.higher_better else "↓"
-    unit = f" ({info.unit})" if info.unit else ""
+    u = info.unit.replace("units", "m") if units == "m" else info.unit
+    unit = f" ({u})" if u else ""
     return f"{info.label}{unit} {arrow}"
 
 

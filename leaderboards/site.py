@@ -146,8 +146,10 @@ def best_value(subs: list[SubmissionRow], category: str, key: str) -> float | No
 def ranking_table(subs: list[SubmissionRow], category: str, metrics: list[str], table_id: str = "") -> str:
     """Ranked rows (:func:`rank_subs`): rank, method, run label, config hash, completion, then the penalised
     mean of every metric, the best value of each column highlighted."""
+    units = {s.units for s in subs}
+    u = next(iter(units)) if len(units) == 1 else None  # "m" when every row was scored in metres
     heads = ["Rank", "Method", "Run", "Config", "Team", "Objects", "Completion", "Submitted"] + [
-        header(INFO[k]) for k in metrics]
+        header(INFO[k], u) for k in metrics]
     best = {k: best_value(subs, category, k) for k in metrics}
     rows = []
     for i, (score, s) in enumerate(rank_subs(subs, category, metrics)):

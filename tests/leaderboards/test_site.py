@@ -71,6 +71,8 @@ def test_ranked_by_penalised_mean_with_completion_and_best_highlighted(site):
     # Axis Ang: the null door counts 90°, the drawer 0° -> penalised Mean over categories (90 + 0) / 2 = 45
     assert ">45.000<" in fail_row and "paper convention 0.000*" in fail_row
     assert 'class="n best"' in rows[0]                        # the ground truth holds the best values
+    head = html.split('<table class="sortable" id="rank-')[1].split("</thead>")[0]
+    assert "Axis Pos (×10 m)" in head and "units" not in head  # the tiny dataset is in metres
 
 
 def test_failure_marks_and_escaping(site):
