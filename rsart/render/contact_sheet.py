@@ -1,6 +1,7 @@
 """Contact sheets of rendered captures: per state, views as RGB | depth (colour-mapped) | part mask,
 with the joint axes projected into the RGB (revolute: red line through the axis, prismatic: yellow
-arrow along it, both drawn at the joint's pose in that state)."""
+arrow along it, both drawn at the joint's pose in that state), and a legend strip at the bottom naming
+each part's mask colour and the axis styles."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -57,6 +58,39 @@ def draw_axes(rgb: np.ndarray, camera: Camera, axes: dict[str, tuple[np.ndarray,
     return img
 
 
+def legend_strip(part_names: list[str], width: int, joint_types: set[str] = frozenset()) -> np.ndarray:
+    """(H, width, 3) uint8 strip naming the mask colour of every part (``part_names`` in part-index order,
+    colours as :func:`colour_mask` gives mask value index + 1) and the axis styles drawn in the RGB tiles."""
+    entries = [(tuple(int(c) for c in PALETTE[i % (len(PALETTE) - 1) + 1]), f"mask {i + 1}: {n}", "box")
+               for i, n in enumerate(part_names)]
+    if "revolute" in joint_types:
+        entries.append(((255, 40, 40), "revolute axis", "line"))
+    if "prismatic" in joint_types:
+        entries.append(((255, 230, 0), "prismatic axis", "arrow"))
+    font, scale, pad, row_h = cv2.FONT_HERSHEY_SIMPLEX, 0.45, 10, 22
+    rows: list[list[tuple]] = [[]]
+    x = pad
+    for colour, text, kind in entries:
+        w = 22 + cv2.getTextSize(text, font, scale, 1)[0][0] + 2 * pad
+        if x + w > width and rows[-1]:
+            rows.append([])
+            x = pad
+        rows[-1].append((x, colour, text, kind))
+        x += w
+    img = np.full((row_h * len(rows) + 6, width, 3), 30, np.uint8)
+    for r, row in enumerate(rows):
+        y = 4 + r * row_h
+        for x0, colour, text, kind in row:
+            if kind == "box":
+                cv2.rectangle(img, (x0, y + 3), (x0 + 16, y + 17), colour, -1)
+            elif kind == "line":
+                cv2.line(img, (x0, y + 10), (x0 + 16, y + 10), colour, 2, cv2.LINE_AA)
+            else:
+                cv2.arrowedLine(img, (x0, y + 10), (x0 + 16, y + 10), colour, 2, cv2.LINE_AA, tipLength=0.4)
+            cv2.putText(img, text, (x0 + 22, y + 15), font, scale, (235, 235, 235), 1, cv2.LINE_AA)
+    return img
+
+
 def _label(tile: np.ndarray, text: str) -> np.ndarray:
     out = tile.copy()
     cv2.rectangle(out, (0, 0), (8 + 9 * len(text), 20), (0, 0, 0), -1)
@@ -110,6 +144,7 @@ def render_sheet(obj_dir: str | Path, out_png: str | Path, views_per_state: int 
         rows.append(np.concatenate(tiles, axis=1))
     width = max(r.shape[1] for r in rows)
     rows = [np.pad(r, ((0, 2), (0, width - r.shape[1]), (0, 0))) for r in rows]
+    rows.append(legend_strip([p.name for p in meta.parts], width, set(kinds.values())))
     out = Path(out_png)
     write_png_rgb(out, np.concatenate(rows, axis=0))
     return out

@@ -78,8 +78,17 @@ def test_contact_sheet(locker, tmp_path):
                  *SMALL]) == 0
     png = render_sheet(out / "locker", tmp_path / "sheet.png", views_per_state=2, tile_width=100)
     img = read_png_rgb(png)
-    assert img.shape == (4 * (75 + 2), 6 * 100, 3)  # 4 states x (2 views x RGB|depth|mask)
-    assert img.std() > 20
+    rows = 4 * (75 + 2)  # 4 states x (2 views x RGB|depth|mask)
+    assert img.shape[0] > rows and img.shape[1:] == (6 * 100, 3)
+    assert img[:rows].std() > 20
+    # the legend strip below: a swatch in the mask colour of every part, the same colours as the mask tiles
+    from rsart.render.contact_sheet import PALETTE, colour_mask
+
+    legend = img[rows:]
+    for i in range(len(locker.parts)):
+        colour = colour_mask(np.array([[i + 1]], np.uint8))[0, 0]
+        assert (np.abs(legend.astype(int) - colour).max(axis=2) == 0).sum() >= 100, i  # a 17x15 swatch
+    assert len(PALETTE) > len(locker.parts)
 
 
 def test_ray_backend(locker, tmp_path):
