@@ -67,7 +67,7 @@ def init_from_field(field_or_model: Any, state_ids: list[str], ref: str, end: st
         dyn = motion.dynamic_mask(fld.means, cfg.tau_mot)
         n_parts, count = count_parts(fld, dyn, None, list(state_ids), cfg)
     labels = motion.coarse_labels(fld.means, int(n_parts), cfg.tau_mot, cfg.min_cluster_frac, cfg.kmeans_seed,
-                                  cfg.kmeans_n_init if hasattr(cfg, "kmeans_n_init") else 10, method="rigid")
+                                  cfg.kmeans_n_init, method="rigid")
     kept = [p for p in range(1, int(labels.max()) + 1) if (labels == p).sum() >= min_part]
     relabel = np.zeros(int(labels.max()) + 1, dtype=np.int64)
     relabel[kept] = np.arange(1, len(kept) + 1)
