@@ -1,0 +1,197 @@
+"""Model selection for articulated models: merge, prune into the parent, re-parent — by held-out loss.
+
+Instead of thresholds, candidate edits of a fitted model are each re-fitted briefly and scored on the
+held-out (``test``) views of every state with a complexity penalty:
+
+    score = L1_heldout + penalty x K        (K = number of movable bodies; L1 mean per pixel and channel)
+
+so an extra body must lower the held-out colour error by more than ``penalty`` to stay (the default
+1e-3 is a quarter of one 8-bit level per pixel). The
+greedy loop applies the best-scoring edit while it improves the score:
+
+* ``merge(a, b)``: b's Gaussians join a (both children of the same parent); a's joint is kept.
+* ``prune(b)``: b's Gaussians join its parent; b's joint is dropped (b must have no children).
+* ``reparent(b, p)``: b hangs on p instead; its joint is re-estimated relative to p with
+  :func:`pd2gs.discovery.kinematics.estimate_joint` on b's centres seen in p's frame in every state.
+
+Assumes the canonical frame is the reference state's pose (joint values 0 there), as :mod:`.init` builds.
+"""
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+from torch import nn
+
+from pd2gs.data import Frame
+from pd2gs.discovery.kinematics import estimate_joint
+
+from .fit import FitConfig, evaluate_views, fit_articulated
+from .model import ArticulatedGaussians
+
+
+@dataclass
+class SelectConfig:
+    """``penalty`` cost of one movable body in held-out mean L1 units; ``refit`` the fit used on every candidate (its
+    ``iters`` are the short re-fit); ``max_rounds`` greedy rounds."""
+
+    penalty: float = 1e-3
+    refit: FitConfig = field(default_factory=lambda: FitConfig(iters=120))
+    max_rounds: int = 6
+
+
+@dataclass
+class Selection:
+    """The chosen model, its score, and every round's ``(edit, score)`` trials in ``log``."""
+
+    model: ArticulatedGaussians
+    score: float
+    log: list[dict] = field(default_factory=list)
+
+
+def _topological(parent: list[int]) -> list[int]:
+    """Old body ids in an order where every parent precedes its children (0 first)."""
+    order, todo = [0], [b for b in range(1, len(parent))]
+    while todo:
+        ready = [b for b in todo if parent[b] in order]
+        if not ready:
+            raise ValueError(f"parent: {parent} has a cycle")
+        order += ready
+        todo = [b for b in todo if b not in ready]
+    return order
+
+
+def rebuild(model: ArticulatedGaussians, owner: list[int], parent: list[int],
+            joints: dict[int, tuple[str, np.ndarray, np.ndarray, np.ndarray]] | None = None) -> ArticulatedGaussians:
+    """A new model from ``model`` with body b's Gaussians given to ``owner[b]`` (``owner[b] == b`` keeps
+    body b), kept bodies' parents ``parent[b]`` (old ids) and optional joint overrides
+    ``joints[b] = (type, axis (3,), pivot (3,), values (S,))``. Bodies are renumbered parents first;
+    ownership logits of merged bodies are combined by logsumexp (their soft weights add up)."""
+    joints = joints or {}
+    kept = [b for b in range(model.num_bodies) if owner[b] == b]
+    sub = {b: i for i, b in enumerate(kept)}
+    order = [kept[i] for i in _topological([-1] + [sub[parent[b]] for b in kept[1:]])]
+    new_id = {b: i for i, b in enumerate(order)}
+
+    def final(b: int) -> int:
+        while owner[b] != b:
+            b = owner[b]
+        return b
+
+    logits = model.ownership_logits.detach()
+    cols = [torch.logsumexp(logits[:, [b for b in range(model.num_bodies) if final(b) == k]], dim=1) for k in order]
+    types, axes, pivots, values = [], [], [], []
+    for k in order[1:]:
+        if k in joints:
+            t, a, p, v = joints[k]
+        else:
+            t, a, p, v = (model.joint_types[k - 1], model.axes[k - 1].detach().numpy(),
+                          model.pivots[k - 1].detach().numpy(), model.values[:, k - 1].detach().numpy())
+        types.append(t)
+        axes.append(np.asarray(a, dtype=np.float64))
+        pivots.append(np.asarray(p, dtype=np.float64))
+        values.append(np.asarray(v, dtype=np.float64))
+    K = len(order) - 1
+    S = model.num_states
+    out = ArticulatedGaussians(copy.deepcopy(model.gaussians), [-1] + [new_id[parent[k]] for k in order[1:]], types,
+                               np.array(axes).reshape(K, 3), np.array(pivots).reshape(K, 3),
+                               np.array(values).reshape(K, S).T.reshape(S, K), torch.stack(cols, dim=1),
+                               temperature=model.temperature)
+    return out
+
+
+def _children(parent: list[int], b: int) -> list[int]:
+    return [c for c in range(1, len(parent)) if parent[c] == b]
+
+
+def relative_joint(model: ArticulatedGaussians, b: int, p: int, ref: int = 0,
+                   trajectories: np.ndarray | None = None) -> tuple[str, np.ndarray, np.ndarray, np.ndarray]:
+    """Body b's joint re-estimated relative to body p: b's owned centres in every state mapped into p's
+    canonical frame (x_p = T_p(s)^-1 x_world), then Kabsch/:func:`estimate_joint` -> (type, axis, pivot, values).
+
+    The world centres are ``trajectories[s]`` (S, N, 3) when given (stage 1's per-state centres, same
+    Gaussian order as the model: measured, they carry a chained child's motion that a flat model's single
+    joint cannot), else the model's own posed centres."""
+    with torch.no_grad():
+        own = model.labels() == b
+        S = model.num_states
+        Q = []
+        for s in range(S):
+            bp = model.body_poses(s)
+            if trajectories is not None:
+                x = torch.as_tensor(np.asarray(trajectories[s])[own.numpy()], dtype=bp.R.dtype)
+            else:
+                x = (bp.R[b] @ model.gaussians.means[own].T).T + bp.t[b]
+            Q.append(((x - bp.t[p]) @ bp.R[p]).double().numpy())  # R^T (x - t) row-wise
+    ids = [str(s) for s in range(S)]
+    je = estimate_joint(np.stack(Q), ids, ids[ref], rule="bic")
+    return je.type, je.axis, je.origin, np.array([je.values[i] for i in ids])
+
+
+def candidates(model: ArticulatedGaussians, ref: int = 0, trajectories: np.ndarray | None = None
+               ) -> list[tuple[dict, ArticulatedGaussians]]:
+    """Every one-step edit of ``model``: merges of siblings, prunes of leaves, re-parents to non-descendants."""
+    n, parent = model.num_bodies, list(model.parent)
+    out = []
+    ident = list(range(n))
+    sizes = np.bincount(model.labels().numpy(), minlength=n)
+    for b in range(1, n):
+        if not _children(parent, b):
+            owner = ident.copy()
+            owner[b] = parent[b]
+            out.append(({"edit": "prune", "body": b}, rebuild(model, owner, parent)))
+        for a in range(1, n):
+            if a != b and parent[a] == parent[b] and not _children(parent, b) and sizes[a] >= sizes[b]:
+                if sizes[a] == sizes[b] and a > b:
+                    continue
+                owner = ident.copy()
+                owner[b] = a
+                out.append(({"edit": "merge", "body": b, "into": a}, rebuild(model, owner, parent)))
+        for p in range(1, n):
+            descendants = {b}
+            for c in range(1, n):  # parents precede children, one pass suffices
+                if parent[c] in descendants:
+                    descendants.add(c)
+            if p == parent[b] or p in descendants:
+                continue
+            par = parent.copy()
+            par[b] = p
+            out.append(({"edit": "reparent", "body": b, "parent": p},
+                        rebuild(model, ident, par, {b: relative_joint(model, b, p, ref, trajectories)})))
+    return out
+
+
+def score(model: ArticulatedGaussians, frames: list[Frame], cfg: SelectConfig) -> float:
+    """Penalised held-out loss of a (fitted) model."""
+    f = cfg.refit
+    return evaluate_views(model, frames, "test", f.background, f.backend) + cfg.penalty * (model.num_bodies - 1)
+
+
+def select_model(model: ArticulatedGaussians, frames: list[Frame], masks=None, cfg: SelectConfig | None = None,
+                 trajectories: np.ndarray | None = None) -> Selection:
+    """Greedy model selection from a fitted ``model`` (see module doc). Candidates are re-fitted with
+    ``cfg.refit`` on the train views; the incumbent is re-fitted the same way so scores compare.
+    ``trajectories``: stage 1's (S, N, 3) per-state centres for re-parenting (see :func:`relative_joint`)."""
+    cfg = cfg or SelectConfig()
+    ref = cfg.refit.ref_state or 0
+    best = copy.deepcopy(model)
+    fit_articulated(best, frames, masks, cfg.refit)
+    best_score = score(best, frames, cfg)
+    sel = Selection(best, best_score, [{"edit": "start", "bodies": best.num_bodies, "score": best_score}])
+    for _ in range(cfg.max_rounds):
+        trials = []
+        for edit, cand in candidates(best, ref, trajectories):
+            fit_articulated(cand, frames, masks, cfg.refit)
+            trials.append((score(cand, frames, cfg), edit, cand))
+            sel.log.append({**edit, "score": trials[-1][0]})
+        if not trials:
+            break
+        s, edit, cand = min(trials, key=lambda t: t[0])
+        if s >= best_score:
+            break
+        best, best_score = cand, s
+        sel.log.append({**edit, "chosen": True, "score": s})
+    sel.model, sel.score = best, best_score
+    return sel

@@ -1,0 +1,100 @@
+"""Model selection: prune a spurious body, merge an over-segmented part, re-parent a chained child."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from pd2gs.articulated.fit import FitConfig
+from pd2gs.articulated.model import ArticulatedGaussians, canonical_gaussians
+from pd2gs.articulated.scenes import make_scene, render_scene
+from pd2gs.articulated.select import SelectConfig, candidates, rebuild, relative_joint, select_model
+
+
+def gaussians_of(scene):
+    return canonical_gaussians(scene.means, scene.quats, scene.scales, scene.colors, scene.opacities)
+
+
+def truth_model(scene):
+    return ArticulatedGaussians(gaussians_of(scene), scene.parent, scene.joint_types, scene.axes, scene.pivots,
+                                scene.values, scene.labels)
+
+
+def trajectories(scene):
+    """Stage 1's per-state centres, here exact."""
+    return np.stack([scene.posed_means(s).numpy() for s in range(scene.values.shape[0])])
+
+
+def flat_flap_model(scene):
+    """The flap-on-lid scene as a flat init gives it: both bodies children of the base, the flap's joint
+    its world motion fitted by Kabsch (not a fixed-axis joint: the lid carries it)."""
+    t, a, p, v = relative_joint(truth_model(scene), 2, 0)
+    return ArticulatedGaussians(gaussians_of(scene), [-1, 0, 0], ["revolute", t], np.stack([scene.axes[0], a]),
+                                np.stack([scene.pivots[0], p]), np.stack([scene.values[:, 0], v], 1), scene.labels)
+
+
+def test_relative_joint_recovers_the_flaps_joint_on_the_lid():
+    scene = make_scene("flap", n=900)
+    t, axis, pivot, values = relative_joint(truth_model(scene), 2, 1)
+    assert t == "revolute"
+    assert abs(float(axis @ scene.axes[1])) > 1 - 1e-6
+    np.testing.assert_allclose(values, scene.values[:, 1], atol=1e-5)
+    d = pivot - scene.pivots[1]
+    assert np.linalg.norm(d - scene.axes[1] * (d @ scene.axes[1])) < 1e-4
+
+
+def test_rebuild_reparents_and_merges_without_changing_the_truths_poses():
+    scene = make_scene("flap", n=900)
+    flat = flat_flap_model(scene)
+    chained = rebuild(flat, [0, 1, 2], [-1, 0, 1], {2: relative_joint(flat, 2, 1, trajectories=trajectories(scene))})
+    assert chained.parent == [-1, 0, 1]
+    chained.harden()
+    for s in range(4):
+        assert torch.allclose(chained.pose(s)[0], scene.posed_means(s), atol=1e-4)
+    merged = rebuild(flat, [0, 1, 1], [-1, 0, 0])
+    assert merged.num_bodies == 2
+    # soft weights of merged bodies add up
+    w_flat, w_merged = flat.weights(), merged.weights()
+    assert torch.allclose(w_merged[:, 1], w_flat[:, 1] + w_flat[:, 2], atol=1e-6)
+    # edits offered: prune each leaf, merge the siblings once, re-parent each under the other
+    edits = sorted(e["edit"] for e, _ in candidates(flat, trajectories=trajectories(scene)))
+    assert edits == ["merge", "prune", "prune", "reparent", "reparent"]
+
+
+@pytest.fixture(scope="module")
+def cfg():
+    return SelectConfig(refit=FitConfig(iters=80))
+
+
+@pytest.mark.slow
+def test_selection_prunes_a_spurious_body_on_a_one_part_scene(cfg):
+    torch.set_num_threads(1)
+    scene = make_scene("static", n=1200)
+    frames, masks = render_scene(scene, views=8, size=(48, 36))
+    top = (scene.means[:, 2] > 0.3).long()
+    model = ArticulatedGaussians(gaussians_of(scene), [-1, 0], ["revolute"], [[1.0, 0, 0]], [[0, 0.2, 0.4]],
+                                 [[0.0], [0.01], [0.02], [0.0]], top)
+    sel = select_model(model, frames, masks, cfg, trajectories(scene))
+    assert sel.model.num_bodies == 1, sel.log
+
+
+@pytest.mark.slow
+def test_selection_merges_an_over_segmented_lid_into_one_part(cfg):
+    torch.set_num_threads(1)
+    scene = make_scene("lid", n=1200)
+    frames, masks = render_scene(scene, views=8, size=(48, 36))
+    lab = scene.labels.clone()
+    lab[(lab == 1) & (scene.means[:, 0] > 0.1)] = 2
+    model = ArticulatedGaussians(gaussians_of(scene), [-1, 0, 0], ["revolute"] * 2, np.tile(scene.axes, (2, 1)),
+                                 np.tile(scene.pivots, (2, 1)), np.tile(scene.values, (1, 2)), lab)
+    sel = select_model(model, frames, masks, cfg, trajectories(scene))
+    assert sel.model.num_bodies == 2, sel.log
+
+
+@pytest.mark.slow
+def test_selection_hangs_the_flap_on_the_lid(cfg):
+    torch.set_num_threads(1)
+    scene = make_scene("flap", n=1200)
+    frames, masks = render_scene(scene, views=8, size=(48, 36))
+    sel = select_model(flat_flap_model(scene), frames, masks, cfg, trajectories(scene))
+    assert sel.model.parent == [-1, 0, 1], sel.log
