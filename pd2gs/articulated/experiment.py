@@ -104,3 +104,64 @@ def main(argv=None) -> int:
 
 if __name__ == "__main__":
     raise SystemExit(main())
+
+
+def from_stage1(iters_stage1: int = 1500, n: int = 3000, views: int = 12, size=(64, 48), fit_iters: int = 600,
+                select: bool = True, seed: int = 0) -> dict:
+    """The whole chain on the lid scene: train a stage-1 PD²GS field (:class:`pd2gs.train.Trainer`), initialise
+    from it (:func:`.init.init_from_field`, counted by the trajectory counter), fit, select -> errors and
+    seconds per step. The largest movable body is compared with the true lid."""
+    from pd2gs.run import TrainedModel
+    from pd2gs.train import TrainConfig, Trainer
+
+    from .init import init_from_field
+    from .select import SelectConfig, select_model
+
+    states = [f"m{s}" for s in range(4)]
+    scene = make_scene("lid", n=n, seed=seed)
+    frames, masks = render_scene(scene, views=views, size=size)
+    out: dict = {"threads": torch.get_num_threads()}
+    t = time.perf_counter()
+    tcfg = TrainConfig(states=states, size=size, iters=iters_stage1, init_points=n, max_gaussians=2 * n,
+                       background=(1.0, 1.0, 1.0), checkpoint_every=10 ** 9, threads=torch.get_num_threads(),
+                       seed=seed)
+    trainer = Trainer(tcfg, frames)
+    trainer.run(progress=False)
+    out["stage1_s"] = round(time.perf_counter() - t, 1)
+    t = time.perf_counter()
+    init = init_from_field(TrainedModel(trainer.field, states), states, "m0", "m3")
+    model = init.model
+    out["init_s"] = round(time.perf_counter() - t, 1)
+    out["init_bodies"] = model.num_bodies
+
+    def lid_errors(m) -> dict:
+        sizes = np.bincount(m.labels().numpy(), minlength=m.num_bodies)
+        if m.num_bodies < 2:
+            return {"bodies": 1}
+        b = 1 + int(np.argmax(sizes[1:]))
+        j = m.joint_dict(b)
+        return {"bodies": m.num_bodies, "parents": list(m.parent), "type": j["type"],
+                "axis_deg": angle_between_deg(j["axis"], scene.axes[0]),
+                "pivot_m": line_distance(scene.pivots[0], scene.axes[0], j["pivot"])}
+
+    out["init"] = lid_errors(model)
+    res = fit_articulated(model, frames, masks, FitConfig(iters=fit_iters, seed=seed))
+    out["fit_s"] = round(res.seconds, 1)
+    out["fit"] = lid_errors(model)
+    out["fit_test_l1"] = evaluate_views(model, frames)
+    if select:
+        t = time.perf_counter()
+        traj = init_traj(trainer, states)
+        sel = select_model(model, frames, masks, SelectConfig(), traj)
+        out["select_s"] = round(time.perf_counter() - t, 1)
+        out["select"] = lid_errors(sel.model)
+        out["select_log"] = sel.log
+    return out
+
+
+def init_traj(trainer, states: list[str]) -> np.ndarray:
+    """(S, N, 3) stage-1 centres per state (the Gaussian order of the canonical field)."""
+    from pd2gs.run import TrainedModel
+
+    tm = TrainedModel(trainer.field, states)
+    return np.stack([tm.state_gaussians(s)["means"].detach().numpy() for s in states])

@@ -22,6 +22,7 @@ from pd2gs.data import Frame
 from pd2gs.losses import photometric_loss
 
 from .model import ArticulatedGaussians
+from .ownership import reassign
 
 
 @dataclass
@@ -49,13 +50,19 @@ class FitConfig:
     backend: str = "cpu"
     harden: bool = True
     seed: int = 0
+    # discrete colour-consistency re-assignment of ownership (.ownership.reassign) every this many steps
+    # (0 = off), not in the last ``reassign_every`` steps; ``reassign_margin`` mean RGB error
+    reassign_every: int = 100
+    reassign_margin: float = 0.02
 
 
 @dataclass
 class FitResult:
-    """``losses`` per step; ``seconds`` wall time of the loop; ``iters`` steps run."""
+    """``losses`` per step; ``seconds`` wall time of the loop; ``iters`` steps run; ``reassigned`` Gaussians
+    moved by each ownership re-assignment."""
 
     losses: list[float] = field(default_factory=list)
+    reassigned: list[int] = field(default_factory=list)
     seconds: float = 0.0
     iters: int = 0
 
@@ -124,6 +131,9 @@ def fit_articulated(model: ArticulatedGaussians, frames: list[Frame], masks: lis
             model.values.grad[cfg.ref_state] = 0
         opt.step()
         res.losses.append(float(loss.detach()))
+        every = cfg.reassign_every
+        if every and (step + 1) % every == 0 and step + 1 + every <= cfg.iters:
+            res.reassigned.append(reassign(model, frames, masks, cfg.reassign_margin))
     res.seconds = time.perf_counter() - t0
     res.iters = cfg.iters
     if cfg.harden:

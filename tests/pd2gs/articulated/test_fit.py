@@ -21,7 +21,7 @@ def test_a_short_fit_turns_the_axis_towards_the_truth(small):
     scene, frames, masks = small
     model = perturbed_lid_model(scene, Perturbation())
     before = joint_errors(model, scene)
-    res = fit_articulated(model, frames, masks, FitConfig(iters=150))
+    res = fit_articulated(model, frames, masks, FitConfig(iters=100))
     after = joint_errors(model, scene)
     assert before["axis_deg"] == pytest.approx(15.0, abs=1e-3)
     assert after["axis_deg"] < 5.0
