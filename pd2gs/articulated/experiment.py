@@ -110,7 +110,8 @@ def from_stage1(iters_stage1: int = 1500, n: int = 3000, views: int = 12, size=(
                 select: bool = True, seed: int = 0) -> dict:
     """The whole chain on the lid scene: train a stage-1 PD²GS field (:class:`pd2gs.train.Trainer`), initialise
     from it (:func:`.init.init_from_field`, counted by the trajectory counter), fit, select -> errors and
-    seconds per step. The largest movable body is compared with the true lid."""
+    seconds per step (after selection, one more full fit). The largest movable body is compared with the
+    true lid."""
     from pd2gs.run import TrainedModel
     from pd2gs.train import TrainConfig, Trainer
 
@@ -156,6 +157,11 @@ def from_stage1(iters_stage1: int = 1500, n: int = 3000, views: int = 12, size=(
         out["select_s"] = round(time.perf_counter() - t, 1)
         out["select"] = lid_errors(sel.model)
         out["select_log"] = sel.log
+        model = sel.model
+        res = fit_articulated(model, frames, masks, FitConfig(iters=fit_iters, seed=seed))
+        out["final_fit_s"] = round(res.seconds, 1)
+        out["final"] = lid_errors(model)
+        out["final_test_l1"] = evaluate_views(model, frames)
     return out
 
 

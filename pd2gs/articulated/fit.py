@@ -112,6 +112,8 @@ def fit_articulated(model: ArticulatedGaussians, frames: list[Frame], masks: lis
     bad = sorted({frames[i].state for i in train if not 0 <= frames[i].state < model.num_states})
     if bad:
         raise ValueError(f"frames: state index {bad[0]} outside the model's {model.num_states} states")
+    if cfg.ref_state is not None and not 0 <= cfg.ref_state < model.num_states:
+        raise ValueError(f"ref_state: {cfg.ref_state} is not one of the model's {model.num_states} states")
     model.hard = False
     opt = torch.optim.Adam(param_groups(model, cfg), eps=1e-15)
     rng = np.random.default_rng(cfg.seed)

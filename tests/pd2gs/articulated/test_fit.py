@@ -66,3 +66,5 @@ def test_bad_fit_input_is_named(small):
         fit_articulated(model, frames, masks[:3], FitConfig(iters=1))
     with pytest.raises(ValueError, match="train"):
         fit_articulated(model, [f for f in frames if f.split == "test"], None, FitConfig(iters=1))
+    with pytest.raises(ValueError, match="ref_state"):
+        fit_articulated(model, frames, masks, FitConfig(iters=1, ref_state=7))

@@ -71,3 +71,15 @@ def test_a_counter_that_needs_images_is_refused():
     scene = make_scene("lid", n=300)
     with pytest.raises(ValueError, match="counter"):
         init_from_field(field_of(scene), STATES, "m0", cfg=DiscoveryConfig(counter="vlm"))
+
+
+@pytest.mark.slow
+def test_a_trained_stage1_field_initialises_and_fits():
+    """The real chain on the lid scene: a short stage-1 training run (pd2gs.train), init, fit."""
+    from pd2gs.articulated.experiment import from_stage1
+
+    torch.set_num_threads(1)
+    out = from_stage1(iters_stage1=300, n=1500, views=8, size=(48, 36), fit_iters=150, select=False)
+    assert out["init_bodies"] >= 2
+    assert out["fit"]["bodies"] == out["init_bodies"] and out["fit"]["type"] in ("revolute", "prismatic")
+    assert out["fit_test_l1"] < 0.05
