@@ -66,7 +66,6 @@ def cfg():
     return SelectConfig(refit=FitConfig(iters=80))
 
 
-@pytest.mark.slow
 def test_selection_prunes_a_spurious_body_on_a_one_part_scene(cfg):
     torch.set_num_threads(1)
     scene = make_scene("static", n=1200)
@@ -78,7 +77,6 @@ def test_selection_prunes_a_spurious_body_on_a_one_part_scene(cfg):
     assert sel.model.num_bodies == 1, sel.log
 
 
-@pytest.mark.slow
 def test_selection_merges_an_over_segmented_lid_into_one_part(cfg):
     torch.set_num_threads(1)
     scene = make_scene("lid", n=1200)
@@ -91,7 +89,6 @@ def test_selection_merges_an_over_segmented_lid_into_one_part(cfg):
     assert sel.model.num_bodies == 2, sel.log
 
 
-@pytest.mark.slow
 def test_selection_hangs_the_flap_on_the_lid(cfg):
     torch.set_num_threads(1)
     scene = make_scene("flap", n=1200)
