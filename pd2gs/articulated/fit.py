@@ -54,6 +54,9 @@ class FitConfig:
     # (0 = off), not in the last ``reassign_every`` steps; ``reassign_margin`` mean RGB error
     reassign_every: int = 100
     reassign_margin: float = 0.02
+    # the first this many steps hold the geometry (means, rotations, scales) still, so the joints and
+    # ownership, not a deformed canonical shape, have to explain the motion
+    joint_warmup: int = 0
 
 
 @dataclass
@@ -126,6 +129,9 @@ def fit_articulated(model: ArticulatedGaussians, frames: list[Frame], masks: lis
             order = list(rng.permutation(train))
         i = order.pop()
         model.temperature = temperature_at(cfg, step)
+        geometry_lr_scale = 0.0 if step < cfg.joint_warmup else 1.0
+        for group, lr in zip(opt.param_groups[:3], (cfg.lr_means, cfg.lr_quats, cfg.lr_scales)):
+            group["lr"] = lr * geometry_lr_scale
         opt.zero_grad(set_to_none=True)
         loss = view_loss(model, frames[i], None if masks is None else masks[i], cfg, bg)
         loss.backward()

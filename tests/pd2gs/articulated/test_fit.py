@@ -68,3 +68,14 @@ def test_bad_fit_input_is_named(small):
         fit_articulated(model, [f for f in frames if f.split == "test"], None, FitConfig(iters=1))
     with pytest.raises(ValueError, match="ref_state"):
         fit_articulated(model, frames, masks, FitConfig(iters=1, ref_state=7))
+
+
+def test_joint_warmup_holds_the_geometry_still(small):
+    scene, frames, masks = small
+    model = perturbed_lid_model(scene, Perturbation())
+    means0, axes0 = model.gaussians.means.detach().clone(), model.axes.detach().clone()
+    fit_articulated(model, frames, masks, FitConfig(iters=4, joint_warmup=4, reassign_every=0))
+    assert torch.equal(model.gaussians.means, means0)
+    assert not torch.equal(model.axes.detach(), axes0)
+    fit_articulated(model, frames, masks, FitConfig(iters=4, joint_warmup=2, reassign_every=0))
+    assert not torch.equal(model.gaussians.means, means0)
