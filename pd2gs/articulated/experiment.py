@@ -106,7 +106,7 @@ if __name__ == "__main__":
     raise SystemExit(main())
 
 
-def from_stage1(iters_stage1: int = 1500, n: int = 3000, views: int = 12, size=(64, 48), fit_iters: int = 600,
+def from_stage1(iters_stage1: int = 1500, n: int = 3000, views: int = 12, size=(64, 48), fit_iters: int = 900,
                 select: bool = True, seed: int = 0) -> dict:
     """The whole chain on the lid scene: train a stage-1 PD²GS field (:class:`pd2gs.train.Trainer`), initialise
     from it (:func:`.init.init_from_field`, counted by the trajectory counter), fit, select -> errors and

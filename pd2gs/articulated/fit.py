@@ -30,7 +30,7 @@ class FitConfig:
     """Settings of :func:`fit_articulated`. Learning rates are Adam step sizes: metres (means, pivots),
     radians or metres (values), unitless (axes stored unnormalised, logits)."""
 
-    iters: int = 600
+    iters: int = 900
     lr_means: float = 1e-4
     lr_quats: float = 2e-3
     lr_scales: float = 5e-3
