@@ -82,8 +82,9 @@ def test_posed_rotations_compose_body_and_gaussian_rotations():
         assert torch.allclose(quat_to_rotmat(quats), want, atol=1e-5)
 
 
-def _small_soft_model(n=40):
+def _small_soft_model(n=40, child="revolute"):
     scene = make_scene("flap", n=600)
+    scene.joint_types = ["revolute", child]
     idx = torch.randperm(scene.means.shape[0], generator=torch.Generator().manual_seed(0))[:n]
     for name in ("means", "quats", "scales", "colors", "opacities", "labels"):
         setattr(scene, name, getattr(scene, name)[idx])
@@ -118,8 +119,9 @@ def _finite_difference_check(model, loss_fn, eps=1e-6, rtol=1e-4):
         assert scale > 1e-6, f"{name}: the loss does not depend on it"
 
 
-def test_joint_gradients_of_the_soft_pose_match_finite_differences():
-    model = _small_soft_model()
+@pytest.mark.parametrize("child", ["revolute", "prismatic"])
+def test_joint_gradients_of_the_soft_pose_match_finite_differences(child):
+    model = _small_soft_model(child=child)
     g = torch.Generator().manual_seed(3)
     wm = torch.randn(40, 3, generator=g, dtype=torch.float64)
     wq = torch.randn(40, 4, generator=g, dtype=torch.float64)
@@ -134,8 +136,9 @@ def test_joint_gradients_of_the_soft_pose_match_finite_differences():
     _finite_difference_check(model, loss)
 
 
-def test_joint_gradients_through_the_rasterizer_match_finite_differences():
-    model = _small_soft_model()
+@pytest.mark.parametrize("child", ["revolute", "prismatic"])
+def test_joint_gradients_through_the_rasterizer_match_finite_differences(child):
+    model = _small_soft_model(child=child)
     K, w2c = ring_cameras(1, 24, 18)[0]
     target = torch.rand(18, 24, 3, generator=torch.Generator().manual_seed(4), dtype=torch.float64)
 
