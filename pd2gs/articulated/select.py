@@ -175,6 +175,8 @@ def select_model(model: ArticulatedGaussians, frames: list[Frame], masks=None, c
     ``cfg.refit`` on the train views; the incumbent is re-fitted the same way so scores compare.
     ``trajectories``: stage 1's (S, N, 3) per-state centres for re-parenting (see :func:`relative_joint`)."""
     cfg = cfg or SelectConfig()
+    if not any(f.split == "test" for f in frames):
+        raise ValueError("frames: model selection needs held-out views (split 'test'); none given")
     ref = cfg.refit.ref_state or 0
     best = copy.deepcopy(model)
     fit_articulated(best, frames, masks, cfg.refit)

@@ -95,3 +95,11 @@ def test_selection_hangs_the_flap_on_the_lid(cfg):
     frames, masks = render_scene(scene, views=8, size=(48, 36))
     sel = select_model(flat_flap_model(scene), frames, masks, cfg, trajectories(scene))
     assert sel.model.parent == [-1, 0, 1], sel.log
+
+
+def test_selection_without_held_out_views_is_refused():
+    scene = make_scene("lid", n=300)
+    frames, masks = render_scene(scene, views=4, size=(32, 24))
+    train = [f for f in frames if f.split == "train"]
+    with pytest.raises(ValueError, match="held-out"):
+        select_model(truth_model(scene), train, None, SelectConfig(refit=FitConfig(iters=1)))
