@@ -13,6 +13,8 @@ greedy loop applies the best-scoring edit while it improves the score:
 * ``prune(b)``: b's Gaussians join its parent; b's joint is dropped (b must have no children).
 * ``reparent(b, p)``: b hangs on p instead; its joint is re-estimated relative to p with
   :func:`pd2gs.discovery.kinematics.estimate_joint` on b's centres seen in p's frame in every state.
+* ``swap(b)``: b's joint type changes (revolute <-> prismatic), parameters from discovery's Kabsch fit
+  (``robust_rigid`` + ``revolute_params`` / ``prismatic_params``) on the same centres.
 
 Assumes the canonical frame is the reference state's pose (joint values 0 there), as :mod:`.init` builds.
 """
@@ -26,7 +28,7 @@ import torch
 from torch import nn
 
 from pd2gs.data import Frame
-from pd2gs.discovery.kinematics import estimate_joint
+from pd2gs.discovery.kinematics import estimate_joint, prismatic_params, revolute_params, robust_rigid
 
 from .fit import FitConfig, evaluate_views, fit_articulated
 from .model import ArticulatedGaussians
@@ -107,13 +109,14 @@ def _children(parent: list[int], b: int) -> list[int]:
 
 
 def relative_joint(model: ArticulatedGaussians, b: int, p: int, ref: int = 0,
-                   trajectories: np.ndarray | None = None) -> tuple[str, np.ndarray, np.ndarray, np.ndarray]:
+                   trajectories: np.ndarray | None = None, joint_type: str | None = None
+                   ) -> tuple[str, np.ndarray, np.ndarray, np.ndarray]:
     """Body b's joint re-estimated relative to body p: b's owned centres in every state mapped into p's
     canonical frame (x_p = T_p(s)^-1 x_world), then Kabsch/:func:`estimate_joint` -> (type, axis, pivot, values).
 
     The world centres are ``trajectories[s]`` (S, N, 3) when given (stage 1's per-state centres, same
     Gaussian order as the model: measured, they carry a chained child's motion that a flat model's single
-    joint cannot), else the model's own posed centres."""
+    joint cannot), else the model's own posed centres. ``joint_type`` forces the type (else the BIC rule)."""
     with torch.no_grad():
         own = model.labels() == b
         S = model.num_states
@@ -126,13 +129,28 @@ def relative_joint(model: ArticulatedGaussians, b: int, p: int, ref: int = 0,
                 x = (bp.R[b] @ model.gaussians.means[own].T).T + bp.t[b]
             Q.append(((x - bp.t[p]) @ bp.R[p]).double().numpy())  # R^T (x - t) row-wise
     ids = [str(s) for s in range(S)]
-    je = estimate_joint(np.stack(Q), ids, ids[ref], rule="bic")
-    return je.type, je.axis, je.origin, np.array([je.values[i] for i in ids])
+    Qs = np.stack(Q)
+    if joint_type is None:
+        je = estimate_joint(Qs, ids, ids[ref], rule="bic")
+        return je.type, je.axis, je.origin, np.array([je.values[i] for i in ids])
+    extent = float(np.linalg.norm(np.ptp(Qs[ref], axis=0))) or 1.0
+    fit = robust_rigid(Qs, ref, 0.02 * extent)
+    others = [k for k in range(S) if k != ref]
+    vals = np.zeros(S)
+    if joint_type == "revolute":
+        P = Qs[ref][fit.inliers]
+        axis, pivot, v = revolute_params([fit.R[k] for k in others], [fit.t[k] for k in others], P.mean(0))
+    else:
+        axis, v = prismatic_params([(Qs[k][fit.inliers] - Qs[ref][fit.inliers]).mean(0) for k in others])
+        pivot = Qs[ref][fit.inliers].mean(0)
+    vals[others] = v
+    return joint_type, axis, pivot, vals
 
 
 def candidates(model: ArticulatedGaussians, ref: int = 0, trajectories: np.ndarray | None = None
                ) -> list[tuple[dict, ArticulatedGaussians]]:
-    """Every one-step edit of ``model``: merges of siblings, prunes of leaves, re-parents to non-descendants."""
+    """Every one-step edit of ``model``: merges of siblings, prunes of leaves, joint-type swaps, re-parents
+    to non-descendants."""
     n, parent = model.num_bodies, list(model.parent)
     out = []
     ident = list(range(n))
@@ -149,6 +167,10 @@ def candidates(model: ArticulatedGaussians, ref: int = 0, trajectories: np.ndarr
                 owner = ident.copy()
                 owner[b] = a
                 out.append(({"edit": "merge", "body": b, "into": a}, rebuild(model, owner, parent)))
+        swapped = "prismatic" if model.joint_types[b - 1] == "revolute" else "revolute"
+        out.append(({"edit": "swap", "body": b, "type": swapped},
+                    rebuild(model, ident, parent,
+                            {b: relative_joint(model, b, parent[b], ref, trajectories, swapped)})))
         for p in range(1, n):
             descendants = {b}
             for c in range(1, n):  # parents precede children, one pass suffices

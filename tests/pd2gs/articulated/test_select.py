@@ -58,7 +58,7 @@ def test_rebuild_reparents_and_merges_without_changing_the_truths_poses():
     assert torch.allclose(w_merged[:, 1], w_flat[:, 1] + w_flat[:, 2], atol=1e-6)
     # edits offered: prune each leaf, merge the siblings once, re-parent each under the other
     edits = sorted(e["edit"] for e, _ in candidates(flat, trajectories=trajectories(scene)))
-    assert edits == ["merge", "prune", "prune", "reparent", "reparent"]
+    assert edits == ["merge", "prune", "prune", "reparent", "reparent", "swap", "swap"]
 
 
 @pytest.fixture(scope="module")
@@ -66,6 +66,7 @@ def cfg():
     return SelectConfig(refit=FitConfig(iters=80))
 
 
+@pytest.mark.slow
 def test_selection_prunes_a_spurious_body_on_a_one_part_scene(cfg):
     torch.set_num_threads(1)
     scene = make_scene("static", n=1200)
@@ -77,6 +78,7 @@ def test_selection_prunes_a_spurious_body_on_a_one_part_scene(cfg):
     assert sel.model.num_bodies == 1, sel.log
 
 
+@pytest.mark.slow
 def test_selection_merges_an_over_segmented_lid_into_one_part(cfg):
     torch.set_num_threads(1)
     scene = make_scene("lid", n=1200)
@@ -89,6 +91,7 @@ def test_selection_merges_an_over_segmented_lid_into_one_part(cfg):
     assert sel.model.num_bodies == 2, sel.log
 
 
+@pytest.mark.slow
 def test_selection_hangs_the_flap_on_the_lid(cfg):
     torch.set_num_threads(1)
     scene = make_scene("flap", n=1200)
@@ -103,3 +106,18 @@ def test_selection_without_held_out_views_is_refused():
     train = [f for f in frames if f.split == "train"]
     with pytest.raises(ValueError, match="held-out"):
         select_model(truth_model(scene), train, None, SelectConfig(refit=FitConfig(iters=1)))
+
+
+def test_selection_swaps_a_lid_started_as_a_drawer_to_revolute():
+    torch.set_num_threads(1)
+    scene = make_scene("lid", n=1200)
+    frames, masks = render_scene(scene, views=8, size=(48, 36))
+    t, axis, pivot, values = relative_joint(truth_model(scene), 1, 0, trajectories=trajectories(scene),
+                                            joint_type="prismatic")
+    assert t == "prismatic"
+    model = ArticulatedGaussians(gaussians_of(scene), [-1, 0], [t], axis[None], pivot[None], values[:, None],
+                                 scene.labels)
+    sel = select_model(model, frames, masks, SelectConfig(refit=FitConfig(iters=80)), trajectories(scene))
+    assert sel.model.joint_types == ["revolute"], sel.log
+    d = sel.model.unit_axes[0].detach().numpy()
+    assert abs(float(d @ scene.axes[0])) > np.cos(np.radians(1.0))
