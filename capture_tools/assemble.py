@@ -30,7 +30,7 @@ from rsart.kinematics import Twin
 
 from .joint import process_joint
 from .pipeline import CaptureSettings, process_state, reconstruct_state
-from .readers import open_recording
+from .recording import open_recording
 
 
 def load_twin(path: str | Path) -> Twin:

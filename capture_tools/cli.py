@@ -106,7 +106,7 @@ def _raw(args) -> int:
 
 
 def _info(args) -> int:
-    from .readers import open_recording
+    from .recording import open_recording
 
     rec = open_recording(args.recording)
     print(json.dumps({"recording": str(args.recording), "frames": len(rec), "intrinsics": rec.intrinsics.to_dict(),

@@ -307,25 +307,3 @@ class VideoRecording(Recording):
         finally:
             cap.release()
 
-
-def open_recording(path: str | Path) -> Recording:
-    """The reader for ``path``: a ``.bag`` file, a video file, or a folder (frame folder, or a folder whose
-    colour is a single video ``color.mp4``/``.avi``/``.mkv``/``.mov``)."""
-    p = Path(path)
-    if p.is_file() and p.suffix.lower() == ".bag":
-        from .bag import BagRecording
-        return BagRecording(p)
-    if p.is_file() and p.suffix.lower() in VIDEO_EXT:
-        return VideoRecording(p)
-    if p.is_dir():
-        if (p / "color").is_dir():
-            return FrameFolderRecording(p)
-        vids = sorted(q for q in p.iterdir() if q.stem == "color" and q.suffix.lower() in VIDEO_EXT)
-        if vids:
-            return VideoRecording(vids[0])
-        bags = sorted(p.glob("*.bag"))
-        if len(bags) == 1:
-            from .bag import BagRecording
-            return BagRecording(bags[0])
-        raise CaptureError(f"{p}: no color/ folder, color video or single .bag recording found")
-    raise CaptureError(f"{p}: not a recording (expected a folder, a video file or a .bag)")

@@ -9,6 +9,7 @@ from __future__ import annotations
 from typing import Iterator
 
 from ..errors import RsartError
+from .worker import init_worker, render_task
 
 
 def run_on_ray(tasks: list, address: str | None = None, workers: int | None = None) -> Iterator[int]:
@@ -17,7 +18,6 @@ def run_on_ray(tasks: list, address: str | None = None, workers: int | None = No
         import ray
     except ImportError:
         raise RsartError("--backend ray needs the optional 'ray' package (pip install ray)") from None
-    from .runner import init_worker, render_task
 
     started = False
     if not ray.is_initialized():

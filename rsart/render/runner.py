@@ -20,7 +20,6 @@ from __future__ import annotations
 import json
 import os
 import shutil
-import zlib
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -29,11 +28,12 @@ import numpy as np
 from ..errors import RsartError
 from ..format import (CamerasFile, DatasetIndex, ObjectMeta, ViewRecord, cameras_to_dict, read_index, read_meta,
                       write_cameras, write_index, write_meta)
-from ..io import dumps_json, read_json, write_depth_png, write_json, write_mask_png, write_png_rgb
+from ..io import dumps_json, read_json, write_json
 from ..kinematics import Twin
 from .frame import RenderOptions
 from .paths import PathSpec, circular_path, fit_radius, fixed_test_views, random_views
 from .protocols import ProtocolPlan, plan_protocol
+from .worker import init_worker, render_task, stable_seed
 
 RENDER_FORMAT = "rsart-render/1"
 MANIFEST = "render.json"
@@ -82,12 +82,6 @@ class ObjectPlan:
     cameras: dict[str, CamerasFile]
     bounds: np.ndarray
     radius: float
-
-
-def stable_seed(*parts: object) -> np.random.SeedSequence:
-    """A seed sequence from ints and strings (CRC32 of strings: stable across runs, unlike ``hash``)."""
-    ints = [p if isinstance(p, int) else zlib.crc32(str(p).encode()) for p in parts]
-    return np.random.SeedSequence(ints)
 
 
 def view_files(state_dir: Path, view_id: str, sensor: bool) -> list[Path]:
@@ -185,53 +179,6 @@ def pending_tasks(plan: ObjectPlan, twin: Twin, job: RenderJob, chunk: int = 8) 
             tasks.append(ViewTask(str(plan.obj_dir), plan.meta.object_id, sp.state.id, dict(sp.state.values),
                                   plan.bounds, plan.radius, todo[i:i + chunk], job, twin))
     return tasks
-
-
-# ----------------------------------------------------------------------------- rendering (runs in workers)
-_WORKER: dict = {"key": None, "renderer": None, "nthreads": 0}
-
-
-def init_worker(nthreads: int) -> None:
-    """Per-process setup: ray-casting threads (0 = all cores)."""
-    _WORKER["nthreads"] = nthreads
-
-
-def render_task(task: ViewTask) -> int:
-    """Render and write the views of ``task``; returns the number of views written.
-
-    Any failure is re-raised as :class:`RsartError` naming the object, state and view.
-    """
-    try:
-        return _render_task(task)
-    except RsartError:
-        raise
-    except Exception as e:  # a worker's traceback is no use to a CLI user: say what failed where
-        raise RsartError(f"{task.obj_dir}: state {task.state_id}: rendering failed "
-                         f"({type(e).__name__}: {e})") from e
-
-
-def _render_task(task: ViewTask) -> int:
-    from .frame import StateRenderer
-
-    job = task.job
-    key = (task.obj_dir, task.state_id, repr(job.options), sorted(task.values.items()), task.radius)
-    if _WORKER["key"] != key:  # scenes are built once per state and process
-        sr = StateRenderer(task.twin, task.values, job.options, task.bounds, task.radius,
-                           nthreads=_WORKER["nthreads"])
-        _WORKER.update(key=key, renderer=sr)
-    sr = _WORKER["renderer"]
-    sdir = Path(task.obj_dir) / "states" / task.state_id
-    for vid, c2w in task.views:
-        rng = np.random.default_rng(stable_seed(job.seed, task.object_id, task.state_id, vid, "view"))
-        f = sr.render(c2w, rng)
-        scale = job.options.depth_scale
-        if job.options.sensor:
-            write_png_rgb(sdir / "rgb_clean" / f"{vid}.png", f.rgb_clean)
-            write_depth_png(sdir / "depth_clean" / f"{vid}.png", f.depth_clean, scale)
-        write_mask_png(sdir / "mask" / f"{vid}.png", f.mask)
-        write_depth_png(sdir / "depth" / f"{vid}.png", f.depth, scale)
-        write_png_rgb(sdir / "rgb" / f"{vid}.png", f.rgb)
-    return len(task.views)
 
 
 def run_tasks(tasks: list[ViewTask], workers: int = 1, backend: str = "process", address: str | None = None,

@@ -13,8 +13,8 @@ import pytest
 from capture_tools.align import align_depth_to_colour
 from capture_tools.bag import BagRecording, write_realsense_bag
 from capture_tools.readers import (FrameFolderRecording, MissingIntrinsicsError, StreamCalibration,
-                                   StreamMismatchError, TruncatedFileError, VideoRecording, open_recording,
-                                   write_calibration)
+                                   StreamMismatchError, TruncatedFileError, VideoRecording, write_calibration)
+from capture_tools.recording import open_recording
 from rsart.camera import Intrinsics
 
 K = Intrinsics(64, 48, 60.0, 60.0, 31.5, 23.5)
