@@ -31,7 +31,7 @@ import numpy as np
 from .errors import Problems, RsartError
 from .format import Joint
 from .kinematics import Twin, TwinPart
-from .usd import AXIS_VECTORS, Y_UP_TO_Z_UP, body_meshes, custom_attr, matrix_from_quat
+from .usd_geometry import AXIS_VECTORS, Y_UP_TO_Z_UP, body_meshes, custom_attr, matrix_from_quat
 
 _SAFE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]{0,127}$")
 _MAX_LAYERS = 256

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import io
 import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -28,7 +29,43 @@ import trimesh
 from .errors import RsartError
 from .io import atomic_write_bytes, atomic_write_text, dumps_json
 from .kinematics import Twin, TwinPart
-from .usd import RSART_USD_FORMAT, prim_name, quat_from_matrix, rotation_x_to
+
+RSART_USD_FORMAT = "rsart-usd/1"
+_IDENT = re.compile(r"[^A-Za-z0-9_]")
+
+
+def prim_name(name: str, taken: set[str]) -> str:
+    """A valid, unique USD prim name for ``name`` (invalid characters -> '_', leading digit prefixed)."""
+    base = _IDENT.sub("_", name) or "_"
+    if base[0].isdigit():
+        base = "_" + base
+    out, k = base, 1
+    while out in taken:
+        out = f"{base}_{k}"
+        k += 1
+    taken.add(out)
+    return out
+
+
+def quat_from_matrix(R: np.ndarray) -> tuple[float, float, float, float]:
+    """(w, x, y, z) unit quaternion of a (3, 3) rotation matrix (scipy, scalar-last -> scalar-first)."""
+    from scipy.spatial.transform import Rotation
+
+    x, y, z, w = Rotation.from_matrix(np.asarray(R, dtype=np.float64)).as_quat()
+    return float(w), float(x), float(y), float(z)
+
+
+def rotation_x_to(axis: np.ndarray) -> np.ndarray:
+    """(3, 3) the smallest rotation taking +X onto the unit ``axis`` (the joint frame rsart writes)."""
+    a = np.asarray(axis, dtype=np.float64)
+    a = a / np.linalg.norm(a)
+    x = np.array([1.0, 0.0, 0.0])
+    c = float(np.dot(x, a))
+    if c < -1.0 + 1e-12:  # opposite: half turn about Z
+        return np.diag([-1.0, -1.0, 1.0])
+    v = np.cross(x, a)
+    K = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+    return np.eye(3) + K + (K @ K) / (1.0 + c)
 
 
 def _texture_image(visual) -> "object | None":
