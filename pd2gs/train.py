@@ -23,6 +23,7 @@ from pd2gs.gaussians import init_from_bounds, init_from_points
 from pd2gs.losses import photometric_loss, psnr
 from pd2gs.render import rasterize
 from pd2gs.rigidity import NeighbourGraph, isometry_loss, knn_graph
+from rsart.io import write_json
 
 
 @dataclass
@@ -388,7 +389,7 @@ class Trainer:
 
 
 def write_json_atomic(path: Path, obj) -> None:
-    """JSON via temp file + rename (NaN/inf written as null)."""
+    """JSON written atomically by :func:`rsart.io.write_json` (NaN/inf written as null)."""
     def clean(x):
         if isinstance(x, float) and not math.isfinite(x):
             return None
@@ -397,9 +398,7 @@ def write_json_atomic(path: Path, obj) -> None:
         if isinstance(x, (list, tuple)):
             return [clean(v) for v in x]
         return x
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    tmp.write_text(json.dumps(clean(obj), indent=2))
-    tmp.replace(path)
+    write_json(path, clean(obj))
 
 
 def load_field(run_dir: str | Path) -> tuple[TrainConfig, DeformableField]:

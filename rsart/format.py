@@ -10,8 +10,6 @@ camera ``c2w`` camera-to-world with OpenCV axes.
 """
 from __future__ import annotations
 
-import math
-import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -19,6 +17,8 @@ from typing import Any
 import numpy as np
 
 from .camera import Camera, Intrinsics
+from .checks import brief as _brief, extra as _extra, is_finite_num as _num, is_int as _is_int
+from .checks import mapping as _dict, relpath as _relpath, string as _str, vector as _vec
 from .errors import Problems, RsartError, ValidationError
 from .io import check_inside, read_json, write_json
 
@@ -28,7 +28,6 @@ STATE_KINDS = ("multi", "single")
 SPLITS = ("train", "test")
 UNITS = ("m", "scene")
 SOURCE_KINDS = ("procedural", "partnet-mobility", "rs-art", "urdf", "usd")
-_SAFE_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]{0,127}$")
 
 
 # ----------------------------------------------------------------------------- records
@@ -146,76 +145,6 @@ class DatasetIndex:
     splits: dict[str, list[str]]
     format: str = FORMAT
     extra: dict[str, Any] = field(default_factory=dict)
-
-
-# ----------------------------------------------------------------------------- checks
-def _num(v: Any) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-
-
-def _is_int(v: Any) -> bool:
-    return isinstance(v, int) and not isinstance(v, bool)
-
-
-def _vec(pb: Problems, path: str, v: Any, n: int, unit: bool = False) -> np.ndarray | None:
-    if not isinstance(v, list) or len(v) != n:
-        pb.add(path, f"expected a list of {n} numbers, got {_brief(v)}")
-        return None
-    if not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
-        pb.add(path, f"expected numbers, got {_brief(v)}")
-        return None
-    if not all(math.isfinite(x) for x in v):
-        pb.add(path, "non-finite number (NaN or inf)")
-        return None
-    a = np.asarray(v, dtype=np.float64)
-    if unit:
-        nrm = float(np.linalg.norm(a))
-        if nrm < 1e-12:
-            pb.add(path, "zero-length vector")
-            return None
-        if abs(nrm - 1.0) > 1e-6:
-            pb.add(path, f"not a unit vector (norm {nrm:.6g})")
-            return None
-        a = a / nrm
-    return a
-
-
-def _brief(v: Any) -> str:
-    s = repr(v)
-    return s if len(s) <= 60 else s[:57] + "..."
-
-
-def _str(pb: Problems, path: str, v: Any, safe: bool = False) -> bool:
-    if not isinstance(v, str) or not v:
-        pb.add(path, f"expected a non-empty string, got {_brief(v)}")
-        return False
-    if safe and not _SAFE_ID.match(v):
-        pb.add(path, f"{v!r} is not a safe id (letters, digits, '_', '.', '-'; at most 128 characters)")
-        return False
-    return True
-
-
-def _relpath(pb: Problems, path: str, v: Any) -> bool:
-    if not _str(pb, path, v):
-        return False
-    if v.startswith(("/", "\\")) or re.match(r"^[A-Za-z]:", v) or ".." in Path(v).parts:
-        pb.add(path, f"{v!r} must be a relative path inside the object folder")
-        return False
-    return True
-
-
-def _dict(pb: Problems, path: str, v: Any, required: tuple[str, ...]) -> bool:
-    if not isinstance(v, dict):
-        pb.add(path, f"expected an object, got {_brief(v)}")
-        return False
-    for k in required:
-        if k not in v:
-            pb.add(f"{path}.{k}" if path else k, "missing")
-    return True
-
-
-def _extra(d: dict, known: tuple[str, ...]) -> dict:
-    return {k: v for k, v in d.items() if k not in known}
 
 
 # ----------------------------------------------------------------------------- meta.json
@@ -510,8 +439,10 @@ def cameras_to_dict(c: CamerasFile) -> dict:
 
 
 def write_cameras(cams: CamerasFile, path: str | Path) -> None:
-    """Atomically write ``cameras.json``."""
-    write_json(path, cameras_to_dict(cams))
+    """Validate and atomically write ``cameras.json``."""
+    d = cameras_to_dict(cams)
+    parse_cameras(d, source=str(path))  # never write what we could not read back
+    write_json(path, d)
 
 
 # ----------------------------------------------------------------------------- index.json
@@ -556,11 +487,14 @@ def read_index(path: str | Path) -> DatasetIndex:
 
 
 def write_index(index: DatasetIndex, path: str | Path) -> None:
+    """Validate and atomically write ``index.json`` (``path`` may be the dataset root)."""
     path = Path(path)
     if path.is_dir():
         path = path / "index.json"
-    write_json(path, {"format": index.format, "name": index.name, "version": index.version,
-                      "objects": index.objects, "splits": index.splits, **index.extra})
+    d = {"format": index.format, "name": index.name, "version": index.version,
+         "objects": index.objects, "splits": index.splits, **index.extra}
+    parse_index(d, source=str(path))  # never write what we could not read back
+    write_json(path, d)
 
 
 def validate_path(path: str | Path, root: str | Path | None = None) -> list[str]:

@@ -28,12 +28,12 @@ from pathlib import Path
 
 import numpy as np
 
+from .checks import is_safe_id, make_safe_id
 from .errors import Problems, RsartError
 from .format import Joint
 from .kinematics import Twin, TwinPart
 from .usd_geometry import AXIS_VECTORS, Y_UP_TO_Z_UP, body_meshes, custom_attr, matrix_from_quat
 
-_SAFE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]{0,127}$")
 _MAX_LAYERS = 256
 
 
@@ -120,10 +120,9 @@ def _transform_problem(T: np.ndarray) -> str | None:
 
 
 def _safe_name(name: object, fallback: str) -> str:
-    if isinstance(name, str) and _SAFE.match(name):
+    if is_safe_id(name):
         return name
-    s = re.sub(r"[^A-Za-z0-9_.\-]", "_", fallback).lstrip("_.-")[:128]
-    return s or "part"
+    return make_safe_id(fallback, "part")
 
 
 def _extra(prim) -> dict:

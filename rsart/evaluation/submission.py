@@ -18,7 +18,6 @@ import io
 import json
 import math
 import os
-import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -26,6 +25,8 @@ from typing import Any
 import numpy as np
 import trimesh
 
+from ..checks import SAFE_ID as _SAFE_VIEW, brief as _brief, is_num as _is_num, kind as _kind
+from ..checks import unknown_keys as _keys, vector as _vector
 from ..errors import Problem, Problems, RsartError
 from ..io import resolve_inside
 from .ground_truth import GroundTruth
@@ -40,7 +41,6 @@ PART_KEYS = ("meshes", "joint")
 JOINT_KEYS = ("type", "axis", "origin", "values")
 JOINT_TYPES = ("revolute", "prismatic")
 MAX_NAME = 128
-_SAFE_VIEW = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]{0,127}$")
 
 
 @dataclass(frozen=True)
@@ -150,48 +150,11 @@ def _load_json(path: Path, limits: Limits, pb: Problems) -> Any:
 
 
 # ----------------------------------------------------------------------------- small checks
-def _brief(v: Any) -> str:
-    s = json.dumps(v) if not isinstance(v, str) else repr(v)
-    return s if len(s) <= 60 else s[:57] + "..."
-
-
-def _kind(v: Any) -> str:
-    return {dict: "an object", list: "a list", str: "a string", bool: "a boolean", type(None): "null",
-            int: "a number", float: "a number"}.get(type(v), type(v).__name__)
-
-
-def _is_num(v: Any) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool)
-
-
-def _keys(pb: Problems, path: str, d: dict, known: tuple[str, ...]) -> None:
-    for k in d:
-        if k not in known:
-            pb.add(f"{path}.{k}" if path else k, f"unknown key (allowed: {', '.join(known)})")
-
-
 def _name_ok(pb: Problems, path: str, name: str) -> bool:
     if not name or len(name) > MAX_NAME or any(ord(c) < 32 for c in name):
         pb.add(path, f"name {_brief(name)} must be 1-{MAX_NAME} printable characters")
         return False
     return True
-
-
-def _vector(pb: Problems, path: str, v: Any, nonzero: bool) -> np.ndarray | None:
-    if not isinstance(v, list) or len(v) != 3:
-        pb.add(path, f"expected a list of 3 numbers, got {_kind(v)} {_brief(v)}")
-        return None
-    if not all(_is_num(x) for x in v):
-        pb.add(path, f"expected 3 numbers, got {_brief(v)}")
-        return None
-    a = np.asarray(v, dtype=np.float64)
-    if not np.all(np.isfinite(a)):
-        pb.add(path, "non-finite number")
-        return None
-    if nonzero and float(np.linalg.norm(a)) < 1e-9:
-        pb.add(path, "zero-length axis")
-        return None
-    return a
 
 
 class _Files:

@@ -31,6 +31,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from ..checks import is_safe_id
 from ..errors import RsartError
 from ..format import DatasetIndex, ObjectMeta, read_index, write_index
 from ..io import read_json
@@ -41,7 +42,6 @@ from .urdf_twin import (WatertightConfig, check_geometry, conversion_notes, fold
 
 URDF_NAME = "mobility.urdf"
 MAX_JSON_BYTES = 20 * 1024 * 1024
-_SAFE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]{0,127}$")
 #: rotation taking the "rotated to z-up" frame of PARIS/DTArt/ArtGS ground truth (their ``R_coord``, +90° about x
 #: applied to the y-up annotation frame) to rsart's world frame: a further -90° about z (the URDF root joint's
 #: rpy (π/2, 0, -π/2) = Rz(-π/2)·Rx(π/2)). ``p_rsart = PARIS_ZUP_TO_WORLD @ p_paris``; no translation.
@@ -293,7 +293,7 @@ def convert_partnet(obj_dir: str | os.PathLike, out: str | os.PathLike, *, objec
     obj_dir = Path(obj_dir)
     twin, info, notes, root_link = read_partnet(obj_dir)
     oid = object_id or f"pm-{info.folder_id}"
-    if not _SAFE.match(oid):
+    if not is_safe_id(oid):
         raise RsartError(f"{obj_dir}: object id {oid!r} is not a safe id; pass one explicitly")
     units = "scene"
     extra: dict[str, Any] = {"world_frame": WORLD_FRAME_NOTE, "root_link": root_link}
@@ -359,7 +359,7 @@ def convert_partnet_root(root: str | os.PathLike, out_root: str | os.PathLike, i
             on_done(i, status, detail)
 
     for i in ids:
-        if not _SAFE.match(i) or not (root / i).is_dir():
+        if not is_safe_id(i) or not (root / i).is_dir():
             rep.missing.append(i)
             done(i, "missing", f"not in {root}")
             continue

@@ -7,21 +7,19 @@ which also derives the RS-Art interaction states from the joint limits.
 """
 from __future__ import annotations
 
-import re
 from pathlib import Path
 
+from ..checks import is_safe_id, make_safe_id
 from ..errors import RsartError
 from ..io import is_empty_dir
 from ..usd import read_usd
 
 USD_SUFFIXES = (".usd", ".usda", ".usdc", ".usdz")
-_SAFE_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]{0,127}$")
 
 
 def default_object_id(src: Path) -> str:
     """A safe object id from a file name: invalid characters become '_' (e.g. 'my door.usd' -> 'my_door')."""
-    oid = re.sub(r"[^A-Za-z0-9_.\-]", "_", Path(src).stem).lstrip("_.-")[:128]
-    return oid or "usd-object"
+    return make_safe_id(Path(src).stem, "usd-object")
 
 
 def convert_usd(src: str | Path, out: str | Path, *, object_id: str | None = None, category: str | None = None,
@@ -42,7 +40,7 @@ def convert_usd(src: str | Path, out: str | Path, *, object_id: str | None = Non
 
     info = read_usd_object_info(src) if src.is_file() else {}
     oid = object_id if object_id is not None else (info.get("object_id") or default_object_id(src))
-    if not _SAFE_ID.match(oid):
+    if not is_safe_id(oid):
         raise RsartError(f"object id {oid!r} is not a safe id (letters, digits, '_', '.', '-')")
     if category is not None and not category.strip():
         raise RsartError("category must be a non-empty string")

@@ -173,3 +173,21 @@ def test_index_validation():
     bad = dict(good, splits={"all": ["a", "zz"]})
     with pytest.raises(ValidationError, match=r"splits.all\[1\]"):
         parse_index(bad)
+
+
+def test_writers_refuse_what_readers_would_reject(tmp_path):
+    """write_cameras / write_index validate what they write, as write_meta does: nothing is left on disk."""
+    from rsart.format import DatasetIndex, write_index
+
+    flipped = np.diag([1.0, 1.0, -1.0, 1.0])  # a reflection, not a rotation
+    c = CamerasFile(Intrinsics(64, 48, 50.0, 51.0, 31.5, 23.5), 0.001,
+                    [ViewRecord("0000", np.eye(4), "train"), ViewRecord("../up", flipped, "train")])
+    with pytest.raises(ValidationError) as e:
+        write_cameras(c, tmp_path / "cameras.json")
+    assert "views[1].id" in str(e.value) and "views[1].c2w" in str(e.value)
+    assert not (tmp_path / "cameras.json").exists()
+
+    idx = DatasetIndex("x", "1", ["a"], {"all": ["a", "b"]})
+    with pytest.raises(ValidationError, match=r"splits.all\[1\]"):
+        write_index(idx, tmp_path)
+    assert not (tmp_path / "index.json").exists()

@@ -98,7 +98,7 @@ CASES = {
     "unknown_joint_key": (edit(_jset("pivot", [0, 0, 0])), "joint.pivot: unknown key"),
     "axis_wrong_length": (edit(_jset("axis", [0, 1])), "joint.axis: expected a list of 3 numbers"),
     "axis_not_numbers": (edit(_jset("axis", [0, "1", 0])), "joint.axis: expected 3 numbers"),
-    "axis_zero": (edit(_jset("axis", [0, 0, 0])), "joint.axis: zero-length axis"),
+    "axis_zero": (edit(_jset("axis", [0, 0, 0])), "joint.axis: zero-length vector"),
     "axis_overflow_inf": (edit(lambda d, s: None), "joint.axis: non-finite number"),
     "revolute_without_origin": (edit(lambda d, s: _get(s, LID)["joint"].pop("origin")),
                                 "joint.origin: missing (a revolute joint needs a point"),
@@ -166,7 +166,7 @@ def test_every_problem_is_listed(dataset, sub_copy, capsys):
     assert main([str(d / "submission.json"), "--data", str(dataset), "--validate-only"]) == 2
     err = capsys.readouterr().err
     assert "4 problems" in err
-    for m in ("results.lamp-0000: missing object", "results.cabinet-0001: missing object", "zero-length axis",
+    for m in ("results.lamp-0000: missing object", "results.cabinet-0001: missing object", "zero-length vector",
               "is absolute"):
         assert m in err
 
