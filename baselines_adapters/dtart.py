@@ -69,7 +69,7 @@ class DTArtAdapter(Adapter):
         report = ExportReport(self.name, obj.id, out_dir, self.protocol, {"two-state": {"start": run.start.id,
                                                                                       "end": run.end.id}})
         keyframes: dict[str, Any] = {}
-        K = None
+        intr = None
         with atomic_dir(out_dir, overwrite=overwrite) as tmp:
             n = 0
             for t, st in enumerate((run.start, run.end)):
@@ -80,9 +80,9 @@ class DTArtAdapter(Adapter):
                     report.notes.append(f"state {st.id} has {len(views)} train views (the paper's protocol "
                                         f"uses {PROTOCOL_VIEWS})")
                 for v in views:
-                    if K is None:
-                        K = v.camera.intrinsics
-                    elif v.camera.intrinsics != K:
+                    if intr is None:
+                        intr = v.camera.intrinsics
+                    elif v.camera.intrinsics != intr:
                         raise RsartError(f"{object_dir}: DTArt takes one cam_K.txt but states "
                                          f"{run.start.id}/{run.end.id} have different intrinsics")
                     fid = f"{n:05d}"
@@ -92,7 +92,7 @@ class DTArtAdapter(Adapter):
                     write_object_mask(tmp / "mask" / f"{fid}.png", v)
                     gl = Camera(v.camera.intrinsics, fr.pose_to_method(v.camera.c2w)).c2w_opengl()
                     keyframes[f"frame_{fid}"] = {"cam_in_ob": floats(gl.reshape(-1)), "time": float(t)}
-            atomic_write_text(tmp / "cam_K.txt", "\n".join(" ".join(f"{x:.10g}" for x in row) for row in K.K) + "\n")
+            atomic_write_text(tmp / "cam_K.txt", "\n".join(" ".join(f"{x:.10g}" for x in row) for row in intr.K) + "\n")
             atomic_write_text(tmp / "init_keyframes.yml", yaml.safe_dump(keyframes, sort_keys=True))
             joints = sorted(obj.meta.joints, key=lambda j: j.child)
             write_gt(tmp / "gt", twin, joints, run.start.values, run.end.values, fr)

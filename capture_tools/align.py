@@ -17,13 +17,11 @@ def align_depth_to_colour(depth: np.ndarray, depth_k: Intrinsics, colour_k: Intr
     h, w = depth.shape
     v, u = np.nonzero(depth > 0)
     z = depth[v, u].astype(np.float64)
-    pts = np.stack([(u - depth_k.cx) / depth_k.fx * z, (v - depth_k.cy) / depth_k.fy * z, z], axis=1)
+    pts = depth_k.unproject(u, v, z)
     pc = pts @ depth_to_colour[:3, :3].T + depth_to_colour[:3, 3]
-    zc = pc[:, 2]
-    ok = zc > 1e-6
-    uc = np.round(colour_k.fx * pc[ok, 0] / zc[ok] + colour_k.cx).astype(np.int64)
-    vc = np.round(colour_k.fy * pc[ok, 1] / zc[ok] + colour_k.cy).astype(np.int64)
-    zc = zc[ok]
+    ok = pc[:, 2] > 1e-6
+    uv, zc = colour_k.project(pc[ok])
+    uc, vc = np.round(uv[:, 0]).astype(np.int64), np.round(uv[:, 1]).astype(np.int64)
     inside = (uc >= 0) & (vc >= 0) & (uc < colour_k.width) & (vc < colour_k.height)
     uc, vc, zc = uc[inside], vc[inside], zc[inside]
     out = np.zeros((colour_k.height, colour_k.width), np.float32)

@@ -159,13 +159,13 @@ def _results(states: list[State], recs: list[str], twin: Twin, settings: Capture
         rec = open_recording(rp)
         opened.append(rec)
         recons.append(reconstruct_state(rec, settings))
-    K = opened[0].intrinsics
+    intr = opened[0].intrinsics
     for st, rec in zip(states, opened):
-        if rec.intrinsics.to_dict() != K.to_dict():
+        if rec.intrinsics.to_dict() != intr.to_dict():
             raise RsartError(f"{rec.source}: joint SfM needs one camera; state {st.id}'s intrinsics differ "
                              f"from {states[0].id}'s (use --sfm per-state)")
     progress(f"joint SfM over {sum(len(r.frames) for r in recons)} frames of {len(states)} states")
-    results, report["joint"] = process_joint(recons, [s.id for s in states], K, twin, [s.values for s in states],
+    results, report["joint"] = process_joint(recons, [s.id for s in states], intr, twin, [s.values for s in states],
                                              settings)
     yield from zip(states, opened, results)
 

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from rsart.camera import Camera, Intrinsics
+from rsart.camera import Intrinsics
 
 
 @dataclass(frozen=True)
@@ -124,10 +124,7 @@ def remove_plane(mask: np.ndarray, depth: np.ndarray, intrinsics: Intrinsics, pl
 
     ``plane_cam`` (4,): n·x + d = 0 in this view's camera frame with n pointing up (towards the object).
     """
-    pts = np.zeros(depth.shape + (3,))
-    cam = Camera(intrinsics, np.eye(4))
-    o, dirs = cam.rays()
-    pts = dirs * depth[..., None]
+    pts = intrinsics.directions() * depth[..., None]
     signed = pts @ plane_cam[:3] + plane_cam[3]
     on_plane = (depth > 0) & (signed < tol)
     return mask & ~on_plane

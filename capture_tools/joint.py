@@ -41,16 +41,16 @@ from .pipeline import CaptureSettings, StateRecon, StateResult, estimate_poses, 
 from .register import Registration, outer_surface_samples
 
 
-def fused_points(recon: StateRecon, K: Intrinsics, stride: int = 2, voxel: float = 0.002) -> np.ndarray:
+def fused_points(recon: StateRecon, intr: Intrinsics, stride: int = 2, voxel: float = 0.002) -> np.ndarray:
     """(N, 3) keyed object depth of every view of a state in its capture frame, voxel-downsampled."""
-    pts = np.concatenate([view_points(K, f.depth, recon.keyed[f.name], recon.c2w[recon.names[f.name]], stride)
+    pts = np.concatenate([view_points(intr, f.depth, recon.keyed[f.name], recon.c2w[recon.names[f.name]], stride)
                           for f in recon.frames])
     pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts)).voxel_down_sample(voxel)
     return np.asarray(pc.points)
 
 
 def static_masks(recons: list[StateRecon], ids: list[str], to_ref: list[np.ndarray], clouds: list[np.ndarray],
-                 K: Intrinsics, tol: float = 0.005) -> dict[str, dict[str, np.ndarray]]:
+                 intr: Intrinsics, tol: float = 0.005) -> dict[str, dict[str, np.ndarray]]:
     """image name -> other state id -> (H, W) bool: the keyed pixels whose depth point (common frame) lies within
     ``tol`` (m) of that state's fused object depth."""
     trees = [cKDTree(c @ T[:3, :3].T + T[:3, 3]) for c, T in zip(clouds, to_ref)]
@@ -62,7 +62,7 @@ def static_masks(recons: list[StateRecon], ids: list[str], to_ref: list[np.ndarr
             v, u = np.nonzero(d > 0)
             M = to_ref[k] @ rc.c2w[name]
             z = d[v, u]
-            cam = np.stack([(u - K.cx) / K.fx * z, (v - K.cy) / K.fy * z, z], 1)
+            cam = intr.unproject(u, v, z)
             pts = cam @ M[:3, :3].T + M[:3, 3]
             out[name] = {}
             for j, tree in enumerate(trees):
@@ -129,27 +129,27 @@ def register_twin_joint(meshes: list[trimesh.Trimesh], clouds: list[np.ndarray],
     return np.linalg.inv(inv)
 
 
-def process_joint(recons: list[StateRecon], ids: list[str], K: Intrinsics, twin: Twin,
+def process_joint(recons: list[StateRecon], ids: list[str], intr: Intrinsics, twin: Twin,
                   values: list[dict[str, float]], settings: CaptureSettings = CaptureSettings()
                   ) -> tuple[list[StateResult], dict]:
-    """Steps 1-4 of the module docstring on per-state reconstructions (same camera ``K``); returns the
+    """Steps 1-4 of the module docstring on per-state reconstructions (same camera ``intr``); returns the
     object-frame results per state and the joint figures (``{"used": False, "reason": ...}`` on fallback)."""
     recons = [renamed(rc, sid) for rc, sid in zip(recons, ids)]
     if len(recons) < 2:
-        return [place_state(rc, K, twin, v, settings) for rc, v in zip(recons, values)], \
+        return [place_state(rc, intr, twin, v, settings) for rc, v in zip(recons, values)], \
             {"used": False, "reason": "one state"}
-    per_state = [place_state(rc, K, twin, v, settings, part_masks=False) for rc, v in zip(recons, values)]
+    per_state = [place_state(rc, intr, twin, v, settings, part_masks=False) for rc, v in zip(recons, values)]
     Ts = [r.registration.T for r in per_state]
-    clouds = [fused_points(rc, K) for rc in recons]
+    clouds = [fused_points(rc, intr) for rc in recons]
     to_ref = [Ts[0] @ np.linalg.inv(T) for T in Ts]
-    static = static_masks(recons, ids, to_ref, clouds, K)
+    static = static_masks(recons, ids, to_ref, clouds, intr)
     groups = {rc.names[f.name]: sid for rc, sid in zip(recons, ids) for f in rc.frames}
     images = {rc.names[f.name]: f.rgb for rc in recons for f in rc.frames}
     depths = {rc.names[f.name]: f.depth for rc in recons for f in rc.frames}
     keyed = {rc.names[f.name]: rc.keyed[f.name] for rc in recons for f in rc.frames}
     if len(images) != sum(len(rc.frames) for rc in recons):
         raise RsartError("joint SfM: state ids repeat")
-    c2w, report = estimate_poses(images, K, depths, keyed, settings, pair_filter=cross_state_filter(groups, static),
+    c2w, report = estimate_poses(images, intr, depths, keyed, settings, pair_filter=cross_state_filter(groups, static),
                                  groups=groups, static=static)
     per_reg = {sid: sum(rc.names[f.name] in c2w for f in rc.frames) for rc, sid in zip(recons, ids)}
     report.update(static_fraction={sid: float(np.mean([static[rc.names[f.name]][o].sum() / max(1, rc.keyed[f.name].sum())
@@ -157,19 +157,19 @@ def process_joint(recons: list[StateRecon], ids: list[str], K: Intrinsics, twin:
                                    for rc, sid in zip(recons, ids)}, registered_per_state=per_reg)
     if min(per_reg.values()) < 3 or sum(per_reg.values()) < sum(len(rc.frames) for rc in recons):
         report.update(used=False, reason="the joint model left frames out; per-state poses kept")
-        return [place_state(rc, K, twin, v, settings) for rc, v in zip(recons, values)], report
+        return [place_state(rc, intr, twin, v, settings) for rc, v in zip(recons, values)], report
     joint = [StateRecon([f for f in rc.frames if rc.names[f.name] in c2w], rc.names, rc.keyed,
                         {n: M for n, M in c2w.items() if groups[n] == sid}, {**rc.report, "joint_sfm": True})
              for rc, sid in zip(recons, ids)]
-    first = [place_state(rc, K, twin, v, settings, part_masks=False) for rc, v in zip(joint, values)]
+    first = [place_state(rc, intr, twin, v, settings, part_masks=False) for rc, v in zip(joint, values)]
     best = max(range(len(first)), key=lambda i: first[i].registration.fitness)
     meshes = [twin.whole_mesh(v) for v in values]
-    obj = [np.concatenate([view_points(K, f.depth, r.masks[f.name], c2w[rc.names[f.name]], 2) for f in r.frames])
+    obj = [np.concatenate([view_points(intr, f.depth, r.masks[f.name], c2w[rc.names[f.name]], 2) for f in r.frames])
            for r, rc in zip(first, joint)]
     T = register_twin_joint(meshes, obj, first[best].registration.T, seed=settings.seed)
     report.update(used=True, registration_seed_state=ids[best])
     shared = Registration(T, 0.0, 0.0, first[best].registration.coarse_fitness)  # residuals computed per state
-    out = [place_state(rc, K, twin, v, settings, registration=shared) for rc, v in zip(joint, values)]
+    out = [place_state(rc, intr, twin, v, settings, registration=shared) for rc, v in zip(joint, values)]
     return out, report
 
 

@@ -56,13 +56,13 @@ reprojection error, likely a depth-reversed solution); SfM is then re-run with t
 def _reconstruct(sdir: Path, images: dict, masks: dict, depths: dict, cams, seed: int
                  ) -> tuple[dict[str, np.ndarray], dict]:
     """One SfM attempt (+ metric scale and RGB-D bundle adjustment with depths), aligned to ``cams``."""
-    K = cams.intrinsics
-    sfm = run_sfm(images, K, masks if len(masks) == len(images) else None, seed=seed)
+    intr = cams.intrinsics
+    sfm = run_sfm(images, intr, masks if len(masks) == len(images) else None, seed=seed)
     info: dict = {"sfm_registered": len(sfm.c2w), "sfm_reprojection_px": sfm.mean_reprojection_error}
     if depths:
         s, _ = metric_scale(sfm, depths)
         sfm = apply_scale(sfm, s)
-        sfm, _ = refine_rgbd(sfm, K, depths)
+        sfm, _ = refine_rgbd(sfm, intr, depths)
     names = [f"{v.id}.png" for v in cams.views if f"{v.id}.png" in sfm.c2w]
     if len(names) < 3:
         raise RsartError(f"{sdir}: SfM registered only {len(names)} views")

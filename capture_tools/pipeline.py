@@ -99,7 +99,7 @@ def select_state(rec: Recording, settings: CaptureSettings) -> tuple[list[RawFra
     return frames, masks, len(scores)
 
 
-def estimate_poses(images: dict[str, np.ndarray], K: Intrinsics, depths: dict[str, np.ndarray],
+def estimate_poses(images: dict[str, np.ndarray], intr: Intrinsics, depths: dict[str, np.ndarray],
                    keyed: dict[str, np.ndarray], settings: CaptureSettings, pair_filter=None,
                    groups: dict[str, str] | None = None,
                    static: dict[str, np.ndarray] | None = None) -> tuple[dict[str, np.ndarray], dict]:
@@ -114,7 +114,7 @@ def estimate_poses(images: dict[str, np.ndarray], K: Intrinsics, depths: dict[st
         # SIFT extraction and matching are multi-threaded, so a rerun can chain the circle differently; a
         # wrongly chained model (seen: 1 run in ~5 on one state, 177° off) disagrees with the sensor's depth
         try:
-            cand = run_sfm(images, K, feat_masks, seed=settings.seed + attempt, pair_filter=pair_filter)
+            cand = run_sfm(images, intr, feat_masks, seed=settings.seed + attempt, pair_filter=pair_filter)
         except RsartError:
             if attempt + 1 == max(1, settings.sfm_attempts) and sfm is None:
                 raise
@@ -130,7 +130,7 @@ def estimate_poses(images: dict[str, np.ndarray], K: Intrinsics, depths: dict[st
     scale, n_ratios = metric_scale(sfm, depths)
     extra: dict = {"depth_scale_factor": scale, "sfm_attempts": attempts}
     if settings.board is not None:
-        seen = {n: p for n, rgb in images.items() if (p := board_pose(rgb, K, settings.board)) is not None}
+        seen = {n: p for n, rgb in images.items() if (p := board_pose(rgb, intr, settings.board)) is not None}
         if len(seen) >= 3:
             scale, _ = board_scale(sfm.c2w, seen)  # the board's metric scale replaces the depth sensor's
             extra.update(board_views=len(seen), board_scale_factor=scale)
@@ -140,7 +140,7 @@ def estimate_poses(images: dict[str, np.ndarray], K: Intrinsics, depths: dict[st
     report: dict = {**extra, "sfm_registered": len(sfm.c2w), "sfm_reprojection_px": sfm.mean_reprojection_error,
                     "metric_scale_ratios": n_ratios, **({"sfm_pairs": sfm.pair_counts} if sfm.pair_counts else {})}
     if settings.rgbd_ba:
-        refined, ba = refine_rgbd(sfm, K, depths)
+        refined, ba = refine_rgbd(sfm, intr, depths)
         kept = ba.median_reproj_px <= settings.max_ba_reproj_px  # a diverged adjustment must not replace SfM
         report["rgbd_ba"] = {"median_reproj_px": ba.median_reproj_px, "median_depth_residual_m": ba.median_depth_residual,
                              "used": bool(kept)}
@@ -148,10 +148,10 @@ def estimate_poses(images: dict[str, np.ndarray], K: Intrinsics, depths: dict[st
             sfm = refined
     c2w = dict(sfm.c2w)
     if settings.depth_icp:
-        band_px = int(round(settings.icp_band * K.width))
+        band_px = int(round(settings.icp_band * intr.width))
         icp_masks = {n: icp_band(m, depths[n], band_px) for n, m in keyed.items()}
-        c2w, icp_rmse = refine_with_depth(c2w, K, depths, icp_masks, voxel=settings.icp_voxel, stride=settings.icp_stride,
-                                          groups=groups, static=static)
+        c2w, icp_rmse = refine_with_depth(c2w, intr, depths, icp_masks, voxel=settings.icp_voxel,
+                                          stride=settings.icp_stride, groups=groups, static=static)
         report["depth_icp_rmse_m"] = icp_rmse
     return c2w, report
 
@@ -183,15 +183,15 @@ def reconstruct_state(rec: Recording, settings: CaptureSettings = CaptureSetting
     return StateRecon(frames, names, masks, c2w, report)
 
 
-def place_state(recon: StateRecon, K: Intrinsics, twin: Twin, values: dict[str, float],
+def place_state(recon: StateRecon, intr: Intrinsics, twin: Twin, values: dict[str, float],
                 settings: CaptureSettings = CaptureSettings(), registration: Registration | None = None,
                 part_masks: bool = True) -> StateResult:
     """Steps 3-5: pedestal plane, twin registration (or the given ``registration``), object-frame poses and
     part masks (skipped, keyed masks returned, when ``part_masks`` is False)."""
     frames, names, c2w, masks = recon.frames, recon.names, recon.c2w, dict(recon.keyed)
     report = dict(recon.report)
-    obj_pts = np.concatenate([view_points(K, f.depth, masks[f.name], c2w[names[f.name]], 2) for f in frames])
-    bg_pts = np.concatenate([view_points(K, f.depth, ~masks[f.name], c2w[names[f.name]], 3) for f in frames])
+    obj_pts = np.concatenate([view_points(intr, f.depth, masks[f.name], c2w[names[f.name]], 2) for f in frames])
+    bg_pts = np.concatenate([view_points(intr, f.depth, ~masks[f.name], c2w[names[f.name]], 3) for f in frames])
     plane, n_in = pedestal_plane(bg_pts, obj_pts)
     up_T = up_alignment(plane)
     report["pedestal_plane_inliers"] = n_in
@@ -200,8 +200,8 @@ def place_state(recon: StateRecon, K: Intrinsics, twin: Twin, values: dict[str, 
         n_cam = w2c[:3, :3] @ plane[:3]
         p0 = -plane[3] * plane[:3]
         plane_cam = np.concatenate([n_cam, [-(n_cam @ (w2c[:3, :3] @ p0 + w2c[:3, 3]))]])
-        masks[f.name] = chroma.remove_plane(masks[f.name], f.depth, K, plane_cam)
-    obj_pts = np.concatenate([view_points(K, f.depth, masks[f.name], c2w[names[f.name]], 2) for f in frames])
+        masks[f.name] = chroma.remove_plane(masks[f.name], f.depth, intr, plane_cam)
+    obj_pts = np.concatenate([view_points(intr, f.depth, masks[f.name], c2w[names[f.name]], 2) for f in frames])
     # 4. twin registration
     reg = registration if registration is not None else register_twin(twin.whole_mesh(values), obj_pts, up_T=up_T,
                                                                        seed=settings.seed)
@@ -211,7 +211,7 @@ def place_state(recon: StateRecon, K: Intrinsics, twin: Twin, values: dict[str, 
     Tinv = np.linalg.inv(reg.T)
     posed = {f.name: Tinv @ c2w[names[f.name]] for f in frames}
     # 5. part masks
-    out_masks = part_masks_from_twin(twin, values, K, posed, masks) if part_masks else masks
+    out_masks = part_masks_from_twin(twin, values, intr, posed, masks) if part_masks else masks
     return StateResult(frames, posed, out_masks, reg, report)
 
 
@@ -221,7 +221,7 @@ def process_state(rec: Recording, twin: Twin, values: dict[str, float],
     return place_state(reconstruct_state(rec, settings), rec.intrinsics, twin, values, settings)
 
 
-def part_masks_from_twin(twin: Twin, values: dict[str, float], K: Intrinsics, c2w: dict[str, np.ndarray],
+def part_masks_from_twin(twin: Twin, values: dict[str, float], intr: Intrinsics, c2w: dict[str, np.ndarray],
                          keyed: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     """(H, W) uint8 part index + 1 per view: the ray-cast twin inside the keyed mask (nearest label where
     the twin misses a keyed pixel; 0 outside the keyed mask)."""
@@ -230,7 +230,7 @@ def part_masks_from_twin(twin: Twin, values: dict[str, float], K: Intrinsics, c2
     scene = build_scene([[m] for m in twin.posed_meshes(values)], [])
     out = {}
     for name, M in c2w.items():
-        lab = scene.cast(Camera(K, M)).part_mask().astype(np.uint8)
+        lab = scene.cast(Camera(intr, M)).part_mask().astype(np.uint8)
         key = keyed[name]
         hit = lab > 0
         if hit.any():

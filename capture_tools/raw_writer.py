@@ -65,9 +65,9 @@ def write_raw_capture(object_dir: str | Path, raw_dir: str | Path, layout: str =
             if layout == "frames":
                 (out / "color").mkdir(exist_ok=True)
             else:
-                K = cams.intrinsics
+                intr = cams.intrinsics
                 vpath = out / VIDEO_CODECS[codec]
-                writer = cv2.VideoWriter(str(vpath), cv2.VideoWriter_fourcc(*codec), fps, (K.width, K.height))
+                writer = cv2.VideoWriter(str(vpath), cv2.VideoWriter_fourcc(*codec), fps, (intr.width, intr.height))
                 if not writer.isOpened():
                     raise RsartError(f"{vpath}: OpenCV cannot write {codec} video here")
             lines = ["name,timestamp_ms"]

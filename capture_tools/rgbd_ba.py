@@ -69,7 +69,6 @@ def refine_rgbd(sfm: SfmResult, intrinsics: Intrinsics, depths: dict[str, np.nda
         u = np.clip(np.round(uv[sel, 0]).astype(int), 0, W - 1)
         v = np.clip(np.round(uv[sel, 1]).astype(int), 0, H - 1)
         d_obs[sel] = d[v, u]
-    K = intrinsics
     n_cam, n_pts = len(names), len(X0)
     w2c0 = [np.linalg.inv(sfm.c2w[n]) for n in names]
     x0 = np.concatenate([np.concatenate([Rotation.from_matrix(m[:3, :3]).as_rotvec(), m[:3, 3]]) for m in w2c0[1:]]
@@ -88,8 +87,9 @@ def refine_rgbd(sfm: SfmResult, intrinsics: Intrinsics, depths: dict[str, np.nda
         pc = np.einsum("nij,nj->ni", R[cam], X[pid]) + t[cam]
         z = pc[:, 2]
         zs = np.where(np.abs(z) < 1e-9, 1e-9, z)
-        ru = (K.fx * pc[:, 0] / zs + K.cx - uv[:, 0]) / sigma_px
-        rv = (K.fy * pc[:, 1] / zs + K.cy - uv[:, 1]) / sigma_px
+        proj, _ = intrinsics.project(np.stack([pc[:, 0], pc[:, 1], zs], 1))
+        ru = (proj[:, 0] - uv[:, 0]) / sigma_px
+        rv = (proj[:, 1] - uv[:, 1]) / sigma_px
         rd = np.where(has_d, (z - d_obs) / (sigma_rel * np.maximum(d_obs, 1e-3) ** 2), 0.0)
         return np.concatenate([ru, rv, rd])
 

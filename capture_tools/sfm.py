@@ -77,10 +77,9 @@ def run_sfm(images: dict[str, np.ndarray], intrinsics: Intrinsics, masks: dict[s
         db = work / "database.db"
         if db.exists():
             db.unlink()
-        K = intrinsics
         reader = pycolmap.ImageReaderOptions()
         reader.camera_model = "PINHOLE"
-        reader.camera_params = f"{K.fx},{K.fy},{K.cx + 0.5},{K.cy + 0.5}"
+        reader.camera_params = f"{intrinsics.fx},{intrinsics.fy},{intrinsics.cx + 0.5},{intrinsics.cy + 0.5}"
         if masks is not None:
             reader.mask_path = str(work / "masks")
         ext = pycolmap.FeatureExtractionOptions()

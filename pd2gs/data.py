@@ -11,6 +11,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from rsart.camera import pinhole_unproject
+
 
 class DataError(ValueError):
     """Invalid training input (message names the path or field)."""
@@ -121,9 +123,7 @@ def backproject_frames(frames: list[Frame], max_points: int = 200_000) -> tuple[
         v, u = torch.meshgrid(torch.arange(h, dtype=torch.float32), torch.arange(w, dtype=torch.float32), indexing="ij")
         ok = f.depth > 0
         z = f.depth[ok]
-        x = (u[ok] - f.K[0, 2]) / f.K[0, 0] * z
-        y = (v[ok] - f.K[1, 2]) / f.K[1, 1] * z
-        pc = torch.stack([x, y, z], 1)
+        pc = pinhole_unproject(f.K, u[ok], v[ok], z)
         c2w = torch.linalg.inv(f.w2c)
         pts.append(pc @ c2w[:3, :3].T + c2w[:3, 3])
         cols.append(f.rgb[ok])

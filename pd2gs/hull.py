@@ -18,6 +18,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from rsart.camera import pinhole_project
+
 
 def foreground(rgb: torch.Tensor, background, thresh: float = 0.08) -> np.ndarray:
     """(H, W) bool: pixels whose colour differs from ``background`` (RGB in [0, 1]) by > ``thresh``
@@ -73,10 +75,8 @@ def state_hulls(frames, background, lo, hi, resolution: int = 64, min_agree: flo
             w2c = f.w2c.double().numpy()
             cam = grid @ w2c[:3, :3].T + w2c[:3, 3]
             z = cam[:, 2]
-            K = f.K.double().numpy()
-            with np.errstate(divide="ignore", invalid="ignore"):
-                u = K[0, 0] * cam[:, 0] / z + K[0, 2]
-                v = K[1, 1] * cam[:, 1] / z + K[1, 2]
+            uv, _ = pinhole_project(f.K.double().numpy(), cam)
+            u, v = uv[:, 0], uv[:, 1]
             ok = (z > 1e-6) & (u >= 0) & (u < w) & (v >= 0) & (v < h)
             ui, vi = u[ok].astype(int), v[ok].astype(int)
             seen[ok] += 1

@@ -47,6 +47,22 @@ class Intrinsics:
         f = 0.5 * height / np.tan(np.deg2rad(fov_y_deg) / 2)
         return Intrinsics(width, height, float(f), float(f), (width - 1) / 2, (height - 1) / 2)
 
+    def project(self, points_cam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(N, 3) camera-frame points (OpenCV axes, metres) -> (N, 2) pixel coords (u, v) and (N,) depth z.
+
+        Distortion is ignored. Points at z = 0 give inf/NaN pixels, as numpy divides (no warning).
+        """
+        return pinhole_project(self.K, np.asarray(points_cam, dtype=np.float64).reshape(-1, 3))
+
+    def unproject(self, u: np.ndarray, v: np.ndarray, z: np.ndarray) -> np.ndarray:
+        """(N, 3) camera-frame points (metres) of pixels (u, v) (each (N,)) at z-depth ``z`` (N,) metres."""
+        return pinhole_unproject(self.K, u, v, z)
+
+    def directions(self) -> np.ndarray:
+        """(H, W, 3) float64 camera-frame rays through every pixel centre, scaled to z = 1."""
+        u, v = np.meshgrid(np.arange(self.width, dtype=np.float64), np.arange(self.height, dtype=np.float64))
+        return pinhole_unproject(self.K, u, v, np.ones_like(u))
+
     def to_dict(self) -> dict:
         return {"width": self.width, "height": self.height, "fx": self.fx, "fy": self.fy,
                 "cx": self.cx, "cy": self.cy,
@@ -113,12 +129,7 @@ class Camera:
         Distortion is ignored (rsart renders undistorted images).
         """
         p = np.asarray(points_world, dtype=np.float64).reshape(-1, 3)
-        pc = p @ self.w2c[:3, :3].T + self.w2c[:3, 3]
-        z = pc[:, 2]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            u = self.intrinsics.fx * pc[:, 0] / z + self.intrinsics.cx
-            v = self.intrinsics.fy * pc[:, 1] / z + self.intrinsics.cy
-        return np.stack([u, v], axis=1), z
+        return self.intrinsics.project(p @ self.w2c[:3, :3].T + self.w2c[:3, 3])
 
     def rays(self) -> tuple[np.ndarray, np.ndarray]:
         """Rays through every pixel centre: origins (H, W, 3) and directions (H, W, 3), world frame.
@@ -126,10 +137,7 @@ class Camera:
         Directions are scaled so that their camera-frame z component is 1 (a ray parameter
         t is then the pixel's z-depth, as depth images store it).
         """
-        K = self.intrinsics
-        u, v = np.meshgrid(np.arange(K.width, dtype=np.float64), np.arange(K.height, dtype=np.float64))
-        d_cam = np.stack([(u - K.cx) / K.fx, (v - K.cy) / K.fy, np.ones_like(u)], axis=-1)
-        d_world = d_cam @ self.c2w[:3, :3].T
+        d_world = self.intrinsics.directions() @ self.c2w[:3, :3].T
         o = np.broadcast_to(self.c2w[:3, 3], d_world.shape).copy()
         return o, d_world
 
@@ -138,6 +146,37 @@ class Camera:
         o, d = self.rays()
         valid = depth > 0
         return o[valid] + d[valid] * depth[valid][:, None]
+
+
+def pinhole_project(K, points_cam):
+    """Pinhole projection with a (3, 3) matrix ``K``: (..., 3) camera-frame points (OpenCV, metres) ->
+    ((..., 2) pixel coords (u, v), (...) z-depth).
+
+    ``K`` and the points are numpy arrays, or torch tensors (then the result is a tensor and
+    differentiable, as pd2gs needs). Pixel (0, 0) is the centre of the top-left pixel.
+    """
+    x, y, z = points_cam[..., 0], points_cam[..., 1], points_cam[..., 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = K[0, 0] * x / z + K[0, 2]
+        v = K[1, 1] * y / z + K[1, 2]
+    return _stack([u, v]), z
+
+
+def pinhole_unproject(K, u, v, z):
+    """Inverse of :func:`pinhole_project`: pixel coords ``u``, ``v`` and z-depth ``z`` (metres; arrays of one
+    shape S) -> (S..., 3) camera-frame points. numpy arrays, or torch tensors (differentiable)."""
+    x = (u - K[0, 2]) / K[0, 0] * z
+    y = (v - K[1, 2]) / K[1, 1] * z
+    return _stack([x, y, z])
+
+
+def _stack(cols: list):
+    """Stack along a new last axis, in numpy or torch as the inputs are."""
+    if isinstance(cols[0], np.ndarray) or np.isscalar(cols[0]):
+        return np.stack(cols, axis=-1)
+    import torch  # only reached with tensors, so rsart's core needs no torch
+
+    return torch.stack(cols, dim=-1)
 
 
 def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = np.array([0.0, 0.0, 1.0])) -> np.ndarray:

@@ -107,8 +107,8 @@ class StateRenderer:
         if self.backend == "raycast":
             self._raster = None
         else:
-            K = options.intrinsics
-            self._raster = rgb_renderer or shared_renderer(K.width, K.height, self.backend.split("-", 1)[1],
+            intr = options.intrinsics
+            self._raster = rgb_renderer or shared_renderer(intr.width, intr.height, self.backend.split("-", 1)[1],
                                                            options.lighting, options.antialias)
             self._gl_scene = self._raster.make_scene([m for ms in parts for m in ms], znear, zfar)
 

@@ -202,11 +202,11 @@ class PyrenderRgb:
     def render(self, camera: Camera, scene: "GLScene") -> tuple[np.ndarray, np.ndarray | None]:
         """(H, W, 3) uint8 RGB premultiplied over black and (H, W) float32 coverage in [0, 1]
         (None when the platform cannot read alpha back; the caller then uses the ray-cast coverage)."""
-        K = camera.intrinsics
-        if (K.width, K.height) != (self.width, self.height):
-            raise ValueError(f"renderer is {self.width}x{self.height}, camera is {K.width}x{K.height}")
-        scene.cam.fx, scene.cam.fy = K.fx, K.fy
-        scene.cam.cx, scene.cam.cy = K.cx + 0.5, K.cy + 0.5  # OpenGL pixel centres are at i + 0.5
+        intr = camera.intrinsics
+        if (intr.width, intr.height) != (self.width, self.height):
+            raise ValueError(f"renderer is {self.width}x{self.height}, camera is {intr.width}x{intr.height}")
+        scene.cam.fx, scene.cam.fy = intr.fx, intr.fy
+        scene.cam.cx, scene.cam.cy = intr.cx + 0.5, intr.cy + 0.5  # OpenGL pixel centres are at i + 0.5
         pose = camera.c2w_opengl()
         scene.scene.set_pose(scene.cam_node, pose)
         scene.scene.set_pose(scene.light_node, pose)

@@ -94,12 +94,12 @@ def view_files(state_dir: Path, view_id: str, sensor: bool) -> list[Path]:
 def plan_object(obj_dir: Path, twin: Twin, meta: ObjectMeta, job: RenderJob) -> ObjectPlan:
     """States, camera poses and booth placement of ``meta``'s object under ``job`` (deterministic)."""
     proto = plan_protocol(job.protocol, meta, job.views, job.test_views)
-    K = job.options.intrinsics
+    intr = job.options.intrinsics
     bounds = np.array([np.full(3, np.inf), np.full(3, -np.inf)])
     for sp in proto.states:
         b = twin.bounds(sp.state.values)
         bounds = np.array([np.minimum(bounds[0], b[0]), np.maximum(bounds[1], b[1])])
-    radius = fit_radius(bounds, K, job.path.fill)
+    radius = fit_radius(bounds, intr, job.path.fill)
     target = bounds.mean(axis=0)
     test = fixed_test_views(target, radius, max(sp.n_test for sp in proto.states), job.path)
     cameras = {}
@@ -113,7 +113,7 @@ def plan_object(obj_dir: Path, twin: Twin, meta: ObjectMeta, job: RenderJob) -> 
             raise RsartError(f"train path {job.train_path!r} is not 'circle' or 'random'")
         views = [ViewRecord(f"{i:04d}", c, "train") for i, c in enumerate(train)]
         views += [ViewRecord(f"{sp.n_train + i:04d}", test[i], "test") for i in range(sp.n_test)]
-        cameras[sp.state.id] = CamerasFile(K, job.options.depth_scale, views,
+        cameras[sp.state.id] = CamerasFile(intr, job.options.depth_scale, views,
                                            extra={"protocol": job.protocol, "state": sp.state.id,
                                                   "settings": settings_digest(job)})
     return ObjectPlan(obj_dir, meta, proto, cameras, bounds, radius)
