@@ -20,7 +20,6 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-import numpy as np
 import yaml
 
 from rsart.errors import RsartError
@@ -168,10 +167,3 @@ def _results(states: list[State], recs: list[str], twin: Twin, settings: Capture
     results, report["joint"] = process_joint(recons, [s.id for s in states], intr, twin, [s.values for s in states],
                                              settings)
     yield from zip(states, opened, results)
-
-
-def residual_summary(report: dict) -> dict:
-    """Median twin-registration residual (m) and fitness over the states of a capture report."""
-    r = [s["registration"] for s in report["states"].values()]
-    return {"icp_rmse_median": float(np.median([x["icp_rmse"] for x in r])),
-            "icp_fitness_median": float(np.median([x["icp_fitness"] for x in r]))}

@@ -33,14 +33,6 @@ def umeyama(src: np.ndarray, dst: np.ndarray, with_scale: bool = True) -> tuple[
     return s, R, md - s * R @ ms
 
 
-def similarity_matrix(s: float, R: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """(4, 4) matrix of x -> s R x + t."""
-    M = np.eye(4)
-    M[:3, :3] = s * R
-    M[:3, 3] = t
-    return M
-
-
 def apply_similarity(c2w: np.ndarray, s: float, R: np.ndarray, t: np.ndarray) -> np.ndarray:
     """(N, 4, 4) cameras moved by x -> s R x + t (rotations stay orthonormal: the scale moves centres only)."""
     out = np.array(c2w, dtype=float, copy=True)

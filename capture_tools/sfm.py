@@ -231,8 +231,3 @@ def apply_scale(sfm: SfmResult, s: float) -> SfmResult:
         c2w[n] = m
     obs = {n: np.concatenate([o[:, :2], o[:, 2:] * s], axis=1) for n, o in sfm.observations.items()}
     return SfmResult(c2w, obs, sfm.points * s, sfm.scale * s, sfm.mean_reprojection_error, sfm.pair_counts)
-
-
-def transform_poses(c2w: dict[str, np.ndarray], T: np.ndarray) -> dict[str, np.ndarray]:
-    """Apply the rigid (4, 4) ``T`` (old frame -> new frame) to every camera: c2w' = T · c2w."""
-    return {n: T @ m for n, m in c2w.items()}

@@ -12,7 +12,6 @@ import re
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import trimesh
 
 from .errors import RsartError
@@ -120,13 +119,3 @@ def read_twin(obj_dir: str | os.PathLike, meta: ObjectMeta | None = None, visual
                 vis = load_mesh_file(vp)
         parts.append(TwinPart(p.index, p.name, geom, vis, {k: v for k, v in p.extra.items() if k != "visual"}))
     return Twin(meta.object_id, parts, [j for j in meta.joints])
-
-
-def states_values(meta: ObjectMeta) -> dict[str, dict[str, float]]:
-    """State id -> joint values (rad/m)."""
-    return {s.id: dict(s.values) for s in meta.states}
-
-
-def posed_vertices(twin: Twin, values: dict[str, float]) -> np.ndarray:
-    """(V, 3) vertices of all parts at ``values`` (in part order), for quick comparisons."""
-    return np.concatenate([m.vertices for m in twin.posed_meshes(values)], axis=0)

@@ -87,10 +87,3 @@ def random_background(height: int, width: int, rng: np.random.Generator) -> np.n
         img[y0:y1 + 1, x0:x1 + 1] = 0.5 * img[y0:y1 + 1, x0:x1 + 1] + 0.5 * colour
     img += rng.normal(0, 6, size=img.shape).astype(np.float32)
     return np.clip(img, 0, 255).astype(np.uint8)
-
-
-def composite(rgb: np.ndarray, alpha: np.ndarray, background: np.ndarray) -> np.ndarray:
-    """(H, W, 3) uint8 ``rgb`` over ``background`` with (H, W) coverage ``alpha`` in [0, 1]."""
-    a = np.clip(alpha.astype(np.float32), 0, 1)[..., None]
-    out = rgb.astype(np.float32) * a + background.astype(np.float32) * (1 - a)
-    return np.clip(np.round(out), 0, 255).astype(np.uint8)

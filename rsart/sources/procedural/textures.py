@@ -166,9 +166,3 @@ def texture_image(m: Material, size: int = 256) -> Image.Image:
     if m.kind not in _MAKERS:
         raise ValueError(f"unknown material kind {m.kind!r} (known: {list(_MAKERS)})")
     return _MAKERS[m.kind](m, size)
-
-
-def mean_color(m: Material) -> tuple[float, float, float]:
-    """Approximate average colour (RGB in [0, 1]) of a material, for previews."""
-    c = np.asarray(m.color, float)
-    return tuple(float(x) for x in np.clip(c * {"wood": 0.85, "weave": 0.7}.get(m.kind, 0.85), 0, 1))
