@@ -24,6 +24,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from rsart.metrics import joints as metric_joints
+
 EPS = 1e-12
 
 
@@ -184,8 +186,11 @@ def prismatic_params(ts: list[np.ndarray]) -> tuple[np.ndarray, list[float]]:
 
 
 @dataclass
-class JointEstimate:
-    """One part's joint: ``type`` chosen by ``rule``; both rules' verdicts kept in ``diagnostics``.
+class JointFit:
+    """One part's fitted joint: ``type`` chosen by ``rule``; both rules' verdicts kept in ``diagnostics``.
+
+    The joint estimate itself is rsart's :class:`rsart.metrics.JointEstimate` (:meth:`estimate`), the one
+    record the metrics compare; this fit adds the per-state values and how the type was chosen.
 
     axis (3,) unit, origin (3,) point on the axis, world frame at the reference state;
     values: state id -> value relative to the reference state (rad | scene units).
@@ -200,14 +205,22 @@ class JointEstimate:
     type_bic: str
     diagnostics: dict = field(default_factory=dict)
 
+    def estimate(self, start: str, end: str) -> metric_joints.JointEstimate:
+        """The joint as the metrics see it: ``delta`` = value[end] - value[start]."""
+        return metric_joints.JointEstimate.make(self.type, self.axis, self.origin, self.values[end] - self.values[start])
+
     def to_submission(self) -> dict:
         return {"type": self.type, "axis": [float(x) for x in self.axis],
                 "origin": [float(x) for x in self.origin], "values": {k: float(v) for k, v in self.values.items()}}
 
 
+#: The old name of :class:`JointFit`, kept while ``articulate.py`` (rewritten under its own issue) uses it.
+JointEstimate = JointFit
+
+
 def estimate_joint(Qs: np.ndarray, state_ids: list[str], ref: str, end: str | None = None, rule: str = "paper",
                    r_thresh: float = 0.05, noise_rel: float = 1e-3, thresh_rel: float = 0.02,
-                   iters: int = 200, seed: int = 0) -> JointEstimate:
+                   iters: int = 200, seed: int = 0) -> JointFit:
     """Estimate one part's joint from its centres Qs (K, n, 3) in the states ``state_ids``.
 
     ``ref``: reference (start) state; ``end``: the state whose value is made positive by the axis sign
@@ -240,4 +253,4 @@ def estimate_joint(Qs: np.ndarray, state_ids: list[str], ref: str, end: str | No
         values = {k: -v for k, v in values.items()}
     diag = {"paper_r": ratio, "bic_revolute": b_rev, "bic_prismatic": b_pri, "inlier_frac": float(m.mean()),
             "rigid_rms": fit.rms, "n": int(len(m)), "far_state": state_ids[far]}
-    return JointEstimate(jtype, axis, origin, values, rule, t_paper, t_bic, diag)
+    return JointFit(jtype, axis, origin, values, rule, t_paper, t_bic, diag)

@@ -19,7 +19,7 @@ import trimesh
 
 from rsart.io import atomic_dir, atomic_write_bytes, write_json
 
-from .kinematics import JointEstimate
+from .kinematics import JointFit
 
 FORMAT = "rsart-submission/1"
 log = logging.getLogger(__name__)
@@ -32,7 +32,7 @@ class PartResult:
     name: str
     label: int
     meshes: dict[str, trimesh.Trimesh] = field(default_factory=dict)
-    joint: JointEstimate | None = None
+    joint: JointFit | None = None
 
 
 @dataclass

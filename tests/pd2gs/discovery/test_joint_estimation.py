@@ -96,3 +96,18 @@ def test_paper_rule_is_thickness_limited_and_bic_is_not():
     assert j.type == "prismatic" and j.type_paper == "prismatic" and j.type_bic == "revolute"
     j = estimate_joint(Qs, STATES, "m0", "m3", rule="bic")
     assert j.type == "revolute" and line_dist(j.origin, j.axis, o, a) < 1e-9
+
+
+def test_a_fit_scores_as_rsart_joint_estimate():
+    """pd2gs's JointFit hands the metrics rsart's one JointEstimate (delta = value[end] - value[start])."""
+    from rsart.metrics.joints import JointEstimate, joint_errors
+
+    m, lab = articulated_means()
+    fit = estimate_joint(m[:, lab == 1], STATES, "m0", "m3", rule="bic")
+    est = fit.estimate("m0", "m3")
+    assert isinstance(est, JointEstimate) and est.type == "revolute"
+    assert math.isclose(est.delta, fit.values["m3"] - fit.values["m0"])
+    true = JointEstimate.make("revolute", DOOR["axis"], DOOR["origin"], DOOR["values"][-1])
+    err = joint_errors(est, true)
+    assert err["axis_ang"] < 1e-6 and err["axis_pos"] < 1e-6 and err["part_motion"] < 1e-6
+    assert err["type_correct"] == 1.0

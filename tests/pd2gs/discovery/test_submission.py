@@ -10,7 +10,7 @@ import trimesh
 import rsart
 from fixture_object import build_object, perfect_field
 from pd2gs.discovery import DiscoveryConfig
-from pd2gs.discovery.kinematics import JointEstimate
+from pd2gs.discovery.kinematics import JointFit
 from pd2gs.discovery.pipeline import discover, discover_safe, method_block
 from pd2gs.discovery.submission import ObjectFailure, ObjectResult, PartResult, write_submission
 from rsart.evaluation import load_ground_truth, read_submission, score_submission
@@ -24,7 +24,7 @@ def data(tmp_path_factory):
 
 
 def _joint(t, axis, origin, end):
-    return JointEstimate(t, np.array(axis, float), np.array(origin, float), {"m0": 0.0, "m3": end}, "bic", t, t)
+    return JointFit(t, np.array(axis, float), np.array(origin, float), {"m0": 0.0, "m3": end}, "bic", t, t)
 
 
 def test_writer_output_validates_and_failures_become_null(data, tmp_path):
