@@ -9,9 +9,12 @@ Per object (docs/evaluation.md has every formula):
 4. CD-s (static part vs true part 0) and CD-w (whole, or union of the predicted parts) per state;
 5. movable-part-count accuracy; PSNR/SSIM and part-mask scores when renders/masks were submitted.
 
-Results are JSON-ready dicts. A metric is either a finite number in ``metrics``, or listed in
-``failures`` with its reason, or in ``not_applicable`` (Axis Pos of prismatic joints, image metrics of a
-submission without images). Seeds derive from names, so any worker count gives identical numbers.
+Results are typed records (:class:`ObjectScore` holding one :class:`PartScore` per true movable part)
+whose ``to_dict()`` is the JSON-ready dict that scores.json and :mod:`rsart.evaluation.report` read;
+:func:`score_submission` returns those dicts, :func:`score_records` the records. A metric is either a
+finite number in ``metrics``, or listed in ``failures`` with its reason, or in ``not_applicable`` (Axis
+Pos of prismatic joints, image metrics of a submission without images). Seeds derive from names, so any
+worker count gives identical numbers.
 """
 from __future__ import annotations
 
@@ -80,6 +83,123 @@ class _Invalid(Exception):
         self.problems = problems
 
 
+# ----------------------------------------------------------------------------- records
+@dataclass(kw_only=True)
+class Scores:
+    """Every metric is exactly one of: a finite number in ``metrics``, a reason in ``failures``, or named in
+    ``not_applicable``. ``chamfer_by_state``: ``"<metric>@<state id>"`` -> Chamfer value, once any is set."""
+
+    metrics: dict[str, float] = field(default_factory=dict)
+    failures: dict[str, str] = field(default_factory=dict)
+    not_applicable: list[str] = field(default_factory=list)
+    chamfer_by_state: dict[str, float] | None = None
+
+    def put(self, key: str, value: float | None, reason: str | None) -> None:
+        """``value`` as metric ``key``, or the failure ``reason`` when there is no value."""
+        if value is not None:
+            self.metrics[key] = float(value)
+        else:
+            self.failures[key] = reason or "failed"
+
+    def per_state(self, base: str, sid: str, v: float | None, why: str | None) -> None:
+        """One state's Chamfer value ``base@sid``, or its failure."""
+        if v is not None:
+            self.by_state()[f"{base}@{sid}"] = v
+        else:
+            self.failures[f"{base}@{sid}"] = why
+
+    def by_state(self) -> dict[str, float]:
+        if self.chamfer_by_state is None:
+            self.chamfer_by_state = {}
+        return self.chamfer_by_state
+
+    def state_means(self, base: str, states: list[str], start: str, end: str) -> None:
+        """From per-state values ``base@sid`` derive ``base_start``, ``base_end`` and ``base`` (mean of the states)."""
+        per = self.by_state()
+        vals = [per.get(f"{base}@{s}") for s in states]
+        for alias, sid in (("start", start), ("end", end)):
+            if sid in states:
+                v = per.get(f"{base}@{sid}")
+                self.put(f"{base}_{alias}", v, self.failures.get(f"{base}@{sid}"))
+        if all(v is not None for v in vals):
+            self.metrics[base] = _mean(vals)
+        else:
+            bad = [s for s, v in zip(states, vals) if v is None]
+            self.failures[base] = f"no value in state(s) {', '.join(bad)}"
+
+    def drop_state_failures(self) -> None:
+        """Forget the per-state failures once the state means have named them."""
+        for k in [k for k in self.failures if "@" in k]:
+            del self.failures[k]
+
+    def _scores_dict(self) -> dict:
+        return {"metrics": self.metrics, "failures": self.failures, "not_applicable": self.not_applicable}
+
+
+@dataclass(kw_only=True)
+class PartScore(Scores):
+    """The scores of one true movable part (``part`` its index in meta.json) and the predicted part matched to it."""
+
+    movable_index: int
+    part: int
+    name: str
+    joint: str
+    type: str
+    pred: str | None
+    pred_type: str | None
+
+    def to_dict(self) -> dict:
+        d = {"movable_index": self.movable_index, "part": self.part, "name": self.name, "joint": self.joint,
+             "type": self.type, "pred": self.pred, "pred_type": self.pred_type, **self._scores_dict()}
+        if self.chamfer_by_state is not None:
+            d["chamfer_by_state"] = self.chamfer_by_state
+        return d
+
+
+@dataclass(kw_only=True)
+class ObjectScore(Scores):
+    """The scores of one object: ``status`` "scored" or "failed" (with ``reason``), its parts, and the
+    object-level metrics (means over parts, static/whole Chamfer, counts, images)."""
+
+    object_id: str
+    category: str
+    units: str
+    eval_states: dict[str, str]
+    chamfer_states: list[str]
+    n_true_movable: int
+    parts: list[PartScore] = field(default_factory=list)
+    bbox_diag: float | None = None
+    """diagonal of the true object's box over the start and end states (scene size for report.py's caps)."""
+    chamfer_floor: dict[str, dict[str, float]] = field(default_factory=dict)
+    status: str = "scored"
+    reason: str | None = None
+    n_pred_movable: int | None = None
+    unmatched_pred: list[str] | None = None
+    part_failures: dict[str, int] | None = None
+    image_failures: list[str] | None = None
+
+    def to_dict(self) -> dict:
+        """The JSON-ready dict of scores.json (the shape :mod:`rsart.evaluation.report` reads)."""
+        d = {"object_id": self.object_id, "category": self.category, "units": self.units,
+             "eval_states": self.eval_states, "chamfer_states": self.chamfer_states,
+             "n_true_movable": self.n_true_movable, **self._scores_dict(), "parts": [p.to_dict() for p in self.parts]}
+        if self.bbox_diag is not None:
+            d["bbox_diag"] = self.bbox_diag
+        d.update(chamfer_floor=self.chamfer_floor, status=self.status)
+        if self.reason is not None:
+            d["reason"] = self.reason
+        if self.n_pred_movable is not None:
+            d["n_pred_movable"] = self.n_pred_movable
+            d["unmatched_pred"] = self.unmatched_pred
+        if self.chamfer_by_state is not None:
+            d["chamfer_by_state"] = self.chamfer_by_state
+        if self.part_failures is not None:
+            d["part_failures"] = self.part_failures
+        if self.image_failures:
+            d["image_failures"] = self.image_failures
+        return d
+
+
 # ----------------------------------------------------------------------------- helpers
 def _mean(xs: list[float]) -> float:
     return float(np.mean(xs))
@@ -137,124 +257,103 @@ def _cd(pred_m, gt_m, cfg: EvalConfig, key: tuple) -> tuple[float | None, str | 
         return None, str(e)
 
 
-def _put(res: dict, key: str, value: float | None, reason: str | None) -> None:
-    if value is not None:
-        res["metrics"][key] = float(value)
-    else:
-        res["failures"][key] = reason or "failed"
-
-
-def _state_means(res: dict, base: str, states: list[str], start: str, end: str) -> None:
-    """From per-state values ``base@sid`` derive ``base_start``, ``base_end`` and ``base`` (mean of the states)."""
-    per = res.setdefault("chamfer_by_state", {})
-    vals = [per.get(f"{base}@{s}") for s in states]
-    for alias, sid in (("start", start), ("end", end)):
-        if sid in states:
-            v = per.get(f"{base}@{sid}")
-            _put(res, f"{base}_{alias}", v, res["failures"].get(f"{base}@{sid}"))
-    if all(v is not None for v in vals):
-        res["metrics"][base] = _mean(vals)
-    else:
-        bad = [s for s, v in zip(states, vals) if v is None]
-        res["failures"][base] = f"no value in state(s) {', '.join(bad)}"
-
-
 # ----------------------------------------------------------------------------- one object
 def score_object(task: _Task) -> dict:
     """Score one object; returns a JSON-ready result dict, or {"problems": [...]} for unusable mesh files."""
+    out = score_object_record(task)
+    return out.to_dict() if isinstance(out, ObjectScore) else out
+
+
+def score_object_record(task: _Task) -> ObjectScore | dict:
+    """Score one object: its :class:`ObjectScore`, or {"problems": [...]} for unusable mesh files."""
     try:
         return _score_object(task)
     except _Invalid as e:
         return {"object_id": task.object_id, "problems": [[p.path, p.message] for p in e.problems]}
 
 
-def _score_object(task: _Task) -> dict:
+def _score_object(task: _Task) -> ObjectScore:
     cfg = task.cfg
     meta = read_meta(task.folder)
     start, end = meta.eval_states["start"], meta.eval_states["end"]
     states = resolve_states(meta, cfg.states)
-    res: dict[str, Any] = {"object_id": meta.object_id, "category": meta.category, "units": meta.units,
-                           "eval_states": {"start": start, "end": end}, "chamfer_states": states,
-                           "n_true_movable": len(meta.parts) - 1, "metrics": {}, "failures": {},
-                           "not_applicable": [], "parts": []}
+    res = ObjectScore(object_id=meta.object_id, category=meta.category, units=meta.units,
+                      eval_states={"start": start, "end": end}, chamfer_states=states,
+                      n_true_movable=len(meta.parts) - 1)
     pred = task.pred
     pred_meshes, pred_whole = _load_pred_meshes(pred, states, cfg) if pred is not None else ({}, {})
     twin = read_twin(task.folder, meta, visuals=False)
     true = _true_joints(meta, twin, start, end)
     gt_posed = {sid: twin.posed_meshes(meta.state(sid).values) for sid in states}
     box = np.concatenate([twin.bounds(meta.state(s).values) for s in (start, end)])
-    res["bbox_diag"] = float(np.linalg.norm(box.max(0) - box.min(0)))  # scene size for the penalty caps (report.py)
-    res["chamfer_floor"] = {sid: {"static": chamfer_floor(mesh_area(gt_posed[sid][0]), cfg.chamfer.n_samples),
+    res.bbox_diag = float(np.linalg.norm(box.max(0) - box.min(0)))  # scene size for the penalty caps (report.py)
+    res.chamfer_floor = {sid: {"static": chamfer_floor(mesh_area(gt_posed[sid][0]), cfg.chamfer.n_samples),
                                   "whole": chamfer_floor(sum(mesh_area(m) for m in gt_posed[sid]),
                                                          cfg.chamfer.n_samples)} for sid in states}
 
     if pred is None:
-        res["status"] = "failed"
-        res["reason"] = "no result (null in the submission)"
+        res.status = "failed"
+        res.reason = "no result (null in the submission)"
         for p, tj, j in true:
-            res["parts"].append(_part_record(meta, p, tj, j, None, None))
+            res.parts.append(_part_record(meta, p, tj, j, None, None))
             for k in PART_METRICS:
                 if k == "axis_pos" and tj.type != "revolute":
-                    res["parts"][-1]["not_applicable"].append(k)
+                    res.parts[-1].not_applicable.append(k)
                 else:
-                    res["parts"][-1]["failures"][k] = res["reason"]
+                    res.parts[-1].failures[k] = res.reason
         types = {tj.type for _, tj, _ in true}
         for k in OBJECT_METRICS:
             applicable = not (k in IMAGE_METRICS or (k in ("axis_pos", "part_motion_rev") and "revolute" not in types)
                               or (k == "part_motion_pri" and "prismatic" not in types))
             if applicable:
-                res["failures"][k] = res["reason"]
+                res.failures[k] = res.reason
             else:
-                res["not_applicable"].append(k)
+                res.not_applicable.append(k)
         return res
 
-    res["status"] = "scored"
+    res.status = "scored"
     movable = pred.movable
-    res["n_pred_movable"] = len(movable)
+    res.n_pred_movable = len(movable)
     pred_j = [JointEstimate.make(pp.joint.type, pp.joint.axis, pp.joint.origin,
                                  pp.joint.values[end] - pp.joint.values[start]) for pp in movable]
     match = match_parts(pred_j, [tj for _, tj, _ in true])
-    res["unmatched_pred"] = [movable[i].name for i in match.unmatched_pred]
+    res.unmatched_pred = [movable[i].name for i in match.unmatched_pred]
 
     # ---- movable parts
     for ti, (p, tj, j) in enumerate(true):
         pi = match.pred_for_true(ti)
         rec = _part_record(meta, p, tj, j, movable[pi].name if pi is not None else None,
                            movable[pi].joint.type if pi is not None else None)
-        res["parts"].append(rec)
+        res.parts.append(rec)
         if pi is None:
             reason = "no predicted part matched to this part (fewer predicted movable parts)"
             for k in PART_METRICS:
                 if k == "axis_pos" and tj.type != "revolute":
-                    rec["not_applicable"].append(k)
+                    rec.not_applicable.append(k)
                 else:
-                    rec["failures"][k] = reason
+                    rec.failures[k] = reason
             continue
         e = joint_errors(pred_j[pi], tj)
         for k in ("axis_ang", "part_motion"):
-            rec["metrics"][k] = e[k]
-        rec["metrics"]["type_acc"] = e["type_correct"]
+            rec.metrics[k] = e[k]
+        rec.metrics["type_acc"] = e["type_correct"]
         if e["axis_pos"] is None:
-            rec["not_applicable"].append("axis_pos")
+            rec.not_applicable.append("axis_pos")
         else:
-            rec["metrics"]["axis_pos"] = e["axis_pos"]
+            rec.metrics["axis_pos"] = e["axis_pos"]
         for sid in states:
             v, why = _cd(pred_meshes.get((movable[pi].name, sid)), gt_posed[sid][p], cfg,
                          (meta.object_id, "cd-m", meta.parts[p].name, sid))
-            rec.setdefault("chamfer_by_state", {})
-            if v is not None:
-                rec["chamfer_by_state"][f"cd_m@{sid}"] = v
-            else:
-                rec["failures"][f"cd_m@{sid}"] = why
-        _state_means(rec, "cd_m", states, start, end)
-        for k in [k for k in rec["failures"] if "@" in k]:
-            del rec["failures"][k]
+            rec.by_state()
+            rec.per_state("cd_m", sid, v, why)
+        rec.state_means("cd_m", states, start, end)
+        rec.drop_state_failures()
 
     # ---- static and whole
     static = pred.parts[0]
     for sid in states:
         v, why = _cd(pred_meshes.get((static.name, sid)), gt_posed[sid][0], cfg, (meta.object_id, "cd-s", sid))
-        _per_state(res, "cd_s", sid, v, why)
+        res.per_state("cd_s", sid, v, why)
         wm, why_w = pred_whole.get(sid), None
         if wm is None:
             ms = [pred_meshes.get((pp.name, sid)) for pp in pred.parts]
@@ -264,58 +363,50 @@ def _score_object(task: _Task) -> dict:
                 why_w = "no whole mesh, and not every predicted part has a mesh for this state"
         gt_whole = trimesh.util.concatenate(gt_posed[sid])
         v, why = _cd(wm, gt_whole, cfg, (meta.object_id, "cd-w", sid)) if wm is not None else (None, why_w)
-        _per_state(res, "cd_w", sid, v, why)
+        res.per_state("cd_w", sid, v, why)
     for base in ("cd_s", "cd_w"):
-        _state_means(res, base, states, start, end)
-    for k in [k for k in res["failures"] if "@" in k]:
-        del res["failures"][k]
+        res.state_means(base, states, start, end)
+    res.drop_state_failures()
 
     # ---- object-level means over movable parts
     _object_means(res, true)
-    res["metrics"]["count_acc"] = 1.0 if len(movable) == len(true) else 0.0
+    res.metrics["count_acc"] = 1.0 if len(movable) == len(true) else 0.0
     _score_images(res, task, meta, pred, match, movable)
     return res
 
 
-def _per_state(res: dict, base: str, sid: str, v: float | None, why: str | None) -> None:
-    if v is not None:
-        res.setdefault("chamfer_by_state", {})[f"{base}@{sid}"] = v
-    else:
-        res["failures"][f"{base}@{sid}"] = why
+def _part_record(meta: ObjectMeta, p: int, tj: JointEstimate, j, pred_name, pred_type) -> PartScore:
+    return PartScore(movable_index=p - 1, part=p, name=meta.parts[p].name, joint=j.name, type=tj.type,
+                     pred=pred_name, pred_type=pred_type)
 
 
-def _part_record(meta: ObjectMeta, p: int, tj: JointEstimate, j, pred_name, pred_type) -> dict:
-    return {"movable_index": p - 1, "part": p, "name": meta.parts[p].name, "joint": j.name, "type": tj.type,
-            "pred": pred_name, "pred_type": pred_type, "metrics": {}, "failures": {}, "not_applicable": []}
-
-
-def _object_means(res: dict, true) -> None:
+def _object_means(res: ObjectScore, true) -> None:
     """Object value of a per-part metric = mean over the parts that scored it; part failures are counted."""
-    res["part_failures"] = {}
+    res.part_failures = {}
     for k in ("cd_m_start", "cd_m_end", "cd_m", "axis_ang", "axis_pos", "type_acc", "part_motion_rev",
               "part_motion_pri"):
         src, want = (k, None)
         if k.startswith("part_motion_"):
             src, want = "part_motion", ("revolute" if k.endswith("rev") else "prismatic")
-        parts = [r for r in res["parts"] if want is None or r["type"] == want]
+        parts = [r for r in res.parts if want is None or r.type == want]
         if want is None and k == "axis_pos":
-            parts = [r for r in parts if r["type"] == "revolute"]
-        vals = [r["metrics"][src] for r in parts if src in r["metrics"]]
-        nfail = sum(1 for r in parts if src in r["failures"])
+            parts = [r for r in parts if r.type == "revolute"]
+        vals = [r.metrics[src] for r in parts if src in r.metrics]
+        nfail = sum(1 for r in parts if src in r.failures)
         if vals:
-            res["metrics"][k] = _mean(vals)
+            res.metrics[k] = _mean(vals)
         if nfail:
-            res["part_failures"][k] = nfail
+            res.part_failures[k] = nfail
             if not vals:
-                res["failures"][k] = f"failed on all {nfail} part(s)"
+                res.failures[k] = f"failed on all {nfail} part(s)"
         if not vals and not nfail:
-            res["not_applicable"].append(k)
+            res.not_applicable.append(k)
 
 
-def _score_images(res: dict, task: _Task, meta: ObjectMeta, pred: PredObject, match, movable) -> None:
+def _score_images(res: ObjectScore, task: _Task, meta: ObjectMeta, pred: PredObject, match, movable) -> None:
     """PSNR/SSIM of submitted renders and part-mask scores of submitted masks, against the dataset's images."""
     if not pred.renders:
-        res["not_applicable"] += ["psnr", "ssim"]
+        res.not_applicable += ["psnr", "ssim"]
     else:
         ps, ss, bad = [], [], []
         for sid, views in sorted(pred.renders.items()):
@@ -329,7 +420,7 @@ def _score_images(res: dict, task: _Task, meta: ObjectMeta, pred: PredObject, ma
                     bad.append(f"{sid}/{vid}: {e}")
         _image_result(res, ("psnr", "ssim"), [ps, ss], bad)
     if not pred.masks:
-        res["not_applicable"] += ["mask_iou", "mask_acc", "mask_f1"]
+        res.not_applicable += ["mask_iou", "mask_acc", "mask_f1"]
         return
     label_of = {pp.name: i + 1 for i, pp in enumerate(pred.parts)}
     lut = {label_of[pred.parts[0].name]: 1}
@@ -350,14 +441,14 @@ def _score_images(res: dict, task: _Task, meta: ObjectMeta, pred: PredObject, ma
     _image_result(res, ("mask_iou", "mask_acc", "mask_f1"), [iou, acc, f1], bad)
 
 
-def _image_result(res: dict, keys: tuple[str, ...], lists: list[list[float]], bad: list[str]) -> None:
+def _image_result(res: ObjectScore, keys: tuple[str, ...], lists: list[list[float]], bad: list[str]) -> None:
     for k, vals in zip(keys, lists):
         if vals:
-            res["metrics"][k] = _mean(vals)
+            res.metrics[k] = _mean(vals)
         else:
-            res["failures"][k] = "; ".join(bad[:3]) or "no view could be scored"
+            res.failures[k] = "; ".join(bad[:3]) or "no view could be scored"
     if bad:
-        res.setdefault("image_failures", []).extend(bad)
+        res.image_failures = (res.image_failures or []) + bad
 
 
 # ----------------------------------------------------------------------------- the submission
@@ -370,17 +461,25 @@ def score_submission(sub: Submission, gt: GroundTruth, cfg: EvalConfig = EvalCon
     """Score every object of ``gt`` (object id -> result dict, in dataset order) with ``workers`` processes.
 
     Returns (results, problems); problems are unusable mesh files found while loading (the CLI exits 2).
+    The result dicts are :meth:`ObjectScore.to_dict` of :func:`score_records`.
     """
+    records, problems = score_records(sub, gt, cfg, workers)
+    return {oid: r.to_dict() for oid, r in records.items()}, problems
+
+
+def score_records(sub: Submission, gt: GroundTruth, cfg: EvalConfig = EvalConfig(),
+                  workers: int | None = None) -> tuple[dict[str, ObjectScore], list[Problem]]:
+    """:func:`score_submission` as typed records: object id -> :class:`ObjectScore`, and the problems."""
     tasks = [_Task(oid, gt.folder(oid), sub.results.get(oid), cfg) for oid in gt.objects]
     workers = workers or default_workers()
     if workers <= 1 or len(tasks) <= 1:
-        outs = [score_object(t) for t in tasks]
+        outs = [score_object_record(t) for t in tasks]
     else:
         with ProcessPoolExecutor(max_workers=min(workers, len(tasks))) as ex:
-            outs = list(ex.map(score_object, tasks))
+            outs = list(ex.map(score_object_record, tasks))
     results, problems = {}, []
     for t, r in zip(tasks, outs):
-        if "problems" in r:
+        if isinstance(r, dict):
             problems += [Problem(p, m) for p, m in r["problems"]]
         else:
             results[t.object_id] = r

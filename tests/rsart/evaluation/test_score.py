@@ -220,3 +220,20 @@ def test_renders_and_masks_are_scored_against_the_dataset_images(dataset, sub_co
     assert r["metrics"]["mask_acc"] == pytest.approx(1 - 10 / (24 * 32))
     assert r["metrics"]["mask_iou"] == pytest.approx((230 / 240 + 1 + 1) / 3)
     assert "psnr" in res["cabinet-0001"]["not_applicable"]
+
+
+def test_typed_records_give_the_json_dicts(dataset, sub_copy):
+    """score_records returns ObjectScore/PartScore records; their to_dict() is what score_submission returns."""
+    from rsart.evaluation.score import ObjectScore, PartScore, score_records
+
+    _, d, save = sub_copy
+    d["results"]["lamp-0000"] = None
+    path = save()
+    gt = load_ground_truth(dataset)
+    sub, _ = read_submission(path, gt)
+    recs, _ = score_records(sub, gt, FAST, workers=1)
+    dicts, _ = score_submission(sub, gt, FAST, workers=1)
+    assert all(isinstance(r, ObjectScore) and all(isinstance(p, PartScore) for p in r.parts) for r in recs.values())
+    assert {k: r.to_dict() for k, r in recs.items()} == dicts
+    lamp = recs["lamp-0000"]
+    assert lamp.status == "failed" and lamp.reason and not lamp.metrics and lamp.failures
