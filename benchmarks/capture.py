@@ -15,14 +15,11 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 os.environ.setdefault("MUJOCO_GL", os.environ["PYOPENGL_PLATFORM"])
 
@@ -34,7 +31,9 @@ from capture_tools.pipeline import CaptureSettings  # noqa: E402
 from capture_tools.pose_eval import pose_errors  # noqa: E402
 from capture_tools.raw_writer import write_raw_capture  # noqa: E402
 from rsart.format import read_cameras  # noqa: E402
-from rsart.io import read_mask_png, write_json  # noqa: E402
+from rsart.io import read_mask_png  # noqa: E402
+
+from common import REPO, machine, write_result  # noqa: E402
 
 STATES = ("m0", "m3")
 ROT_TARGET_DEG, TRANS_TARGET_M = 0.5, 0.005
@@ -124,9 +123,9 @@ def main() -> int:
         summary[mode] = {"runs": len(rs), "runs_meeting_targets_per_state": sum(r["meets_targets_per_state"] for r in rs),
                          "worst_state_median_rot_deg": max(s["median_rot_deg"] for r in rs for s in r["states"].values()),
                          "worst_state_median_trans_m": max(s["median_trans_m"] for r in rs for s in r["states"].values())}
-    write_json(args.out, {"benchmark": "capture poses, per-state vs joint SfM", "targets": {
-        "median_rot_deg": ROT_TARGET_DEG, "median_trans_m": TRANS_TARGET_M}, "machine": platform.platform(),
-        "cpus": os.cpu_count(), "summary": summary, "runs": runs})
+    write_result(args.out, {"benchmark": "capture poses, per-state vs joint SfM", "targets": {
+        "median_rot_deg": ROT_TARGET_DEG, "median_trans_m": TRANS_TARGET_M}, "machine": machine(),
+        "summary": summary, "runs": runs})
     print(summary)
     return 0
 

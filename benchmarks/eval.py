@@ -15,21 +15,18 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
+from rsart import __version__
+from rsart.evaluation import EvalConfig, load_ground_truth, make_gt_submission, read_submission, score_submission
+from rsart.evaluation.ground_truth import GroundTruth
+from rsart.evaluation.report import build_scores, write_reports
 
-from rsart import __version__  # noqa: E402
-from rsart.evaluation import EvalConfig, load_ground_truth, make_gt_submission, read_submission, score_submission  # noqa: E402
-from rsart.evaluation.ground_truth import GroundTruth  # noqa: E402
-from rsart.evaluation.report import build_scores, write_reports  # noqa: E402
-from rsart.io import write_json  # noqa: E402
+from common import REPO, load_avg, machine, write_result
 
 SPLITS = ("rs-art-like", "partnet-like")
 TARGET_S = 30.0
@@ -102,13 +99,11 @@ def main() -> int:
         "seconds_make_gt_submission": round(t_make, 2),
         "gt_max_joint_error": max_joint, "gt_chamfer_over_floor": {"min": round(min(ratios), 3),
                                                                     "max": round(max(ratios), 3)},
-        "machine": {"cpus": os.cpu_count(), "python": platform.python_version(), "platform": platform.platform(),
-                    "load_average_1_5_15_before": [round(x, 2) for x in load_before],
-                    "load_average_1_5_15_after": [round(x, 2) for x in os.getloadavg()]},
+        "machine": machine(load_average_1_5_15_before=[round(x, 2) for x in load_before],
+                           load_average_1_5_15_after=load_avg()),
         "rsart": __version__, "date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
     }
-    write_json(args.out, result)
-    print(json.dumps(result, indent=2))
+    write_result(args.out, result, echo=True)
     return 0
 
 

@@ -12,9 +12,7 @@ files, bytes, triangles) and the machine's load average (other jobs share the co
 from __future__ import annotations
 
 import argparse
-import json
 import os
-import platform
 import statistics
 import subprocess
 import sys
@@ -22,11 +20,9 @@ import tempfile
 import time
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
+from rsart import __version__
 
-from rsart import __version__  # noqa: E402
-from rsart.io import write_json  # noqa: E402
+from common import REPO, load_avg, machine, write_result
 
 TARGET_S = 60.0
 
@@ -87,13 +83,10 @@ def main(argv: list[str] | None = None) -> int:
         "benchmark": "rsart generate --suite rsart-synth (twins only), fresh interpreter, wall clock",
         "target_s": TARGET_S, "median_s": round(med, 2), "runs_s": runs, "meets_target": med < TARGET_S,
         "workers": args.workers, "suite": stats,
-        "machine": {"cpus": os.cpu_count(), "python": platform.python_version(), "platform": platform.platform(),
-                    "loadavg_before": [round(x, 2) for x in load_before],
-                    "loadavg_after": [round(x, 2) for x in os.getloadavg()]},
+        "machine": machine(loadavg_before=[round(x, 2) for x in load_before], loadavg_after=load_avg()),
         "rsart_version": __version__, "date_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
     }
-    write_json(args.out, result)
-    print(json.dumps(result, indent=2))
+    write_result(args.out, result, echo=True)
     return 0
 
 

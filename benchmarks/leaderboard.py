@@ -20,13 +20,12 @@ import tempfile
 import time
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
-sys.path.insert(0, str(REPO / "tests" / "leaderboards"))
+from common import REPO, machine, test_helpers, write_result
 
 
 def throughput(tmp: Path, n_objects: int, uploads: int, workers: int, samples: int) -> dict:
-    from lb_helpers import Server, zip_folder
+    lb = test_helpers("leaderboards/lb_helpers.py")
+    Server, zip_folder = lb.Server, lb.zip_folder
     from leaderboards.jobs import create_token
     from leaderboards.schema import open_engine
     from rsart.evaluation import load_ground_truth, make_gt_submission
@@ -145,11 +144,10 @@ def main() -> int:
             thr["loadavg_1min_after"] = round(os.getloadavg()[0], 2)
             print("throughput:", thr, flush=True)
     res = {"benchmark": "leaderboards: sustained scoring throughput of the server; static site build time",
-           "machine": {"cpus": os.cpu_count()},
+           "machine": machine(),
            "throughput": thr, "site_build": site,
            "notes": "No target was set in the issue; figures are measured, on a 2-core machine shared with other jobs."}
-    a.out.parent.mkdir(parents=True, exist_ok=True)
-    a.out.write_text(json.dumps(res, indent=1) + "\n")
+    write_result(a.out, res)
     print(f"wrote {a.out}")
     return 0
 

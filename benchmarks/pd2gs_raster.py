@@ -12,18 +12,17 @@ Reports the median of ``--steps`` steps after warm-up, wall clock and process CP
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
-import platform
 import statistics
 import time
-from pathlib import Path
 
 import pd2gs  # noqa: F401  (sets OMP_WAIT_POLICY before torch loads)
 import torch
 
 from pd2gs.render import rasterize
+
+from common import machine, write_result
 
 
 def scene(n: int, opacity: str, seed: int = 0):
@@ -100,16 +99,12 @@ def main() -> None:
 def _write(args, rows) -> None:
     result = {
         "benchmark": "pd2gs_raster", "what": "rasterize + L1 + backward, float32, 2 threads",
-        "machine": {"cpus": os.cpu_count(), "processor": platform.processor(),
-                    "loadavg_at_end": os.getloadavg()},
+        "machine": machine(loadavg_at_end=os.getloadavg()),
         "torch": torch.__version__, "steps": args.steps, "rows": rows,
         "note": "wall-clock on a box shared with other jobs; cpu_ms_per_step is process CPU time "
                 "(all threads); loadavg per row (1/5/15 min) taken after the row",
     }
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(args.out).with_suffix(".tmp")
-    tmp.write_text(json.dumps(result, indent=2))
-    tmp.replace(args.out)
+    write_result(args.out, result)
 
 
 if __name__ == "__main__":

@@ -27,6 +27,8 @@ from pd2gs.render import rasterize
 from pd2gs.synthetic import make_frames
 from pd2gs.train import TrainConfig, Trainer
 
+from common import machine, write_result
+
 
 def _trainer(size: int, n: int, backend: str) -> Trainer:
     frames = make_frames(views=8, size=(size, size), n_gaussians=4000)
@@ -155,7 +157,7 @@ def main() -> None:
     # keep earlier sections (e.g. a full run measured separately) unless this run replaces them
     result = json.loads(out.read_text()) if out.is_file() else {}
     result.update({"benchmark": "pd2gs_train", "steps": rows, "loadavg_at_end": os.getloadavg(),
-                   "torch": torch.__version__, "cpus": os.cpu_count(),
+                   "torch": torch.__version__, "machine": machine(),
                    "note": "wall clock on a box shared with other jobs; cpu_ms_per_step is process CPU "
                            "time; loadavg per row"})
     if args.breakdown and not args.skip_steps:
@@ -168,10 +170,7 @@ def main() -> None:
         result["full_run"] = full_run(args.object, args.iters, args.run_dir)
         print(json.dumps(result["full_run"], indent=1))
         result["loadavg_at_end"] = os.getloadavg()
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_suffix(".tmp")
-    tmp.write_text(json.dumps(result, indent=2))
-    tmp.replace(out)
+    write_result(out, result)
     print("wrote", args.out)
 
 

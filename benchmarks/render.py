@@ -20,11 +20,9 @@ from __future__ import annotations
 
 import argparse
 import concurrent.futures as cf
-import json
 import math
 import multiprocessing as mp
 import os
-import platform
 import sys
 import tempfile
 import time
@@ -40,6 +38,8 @@ from rsart.render.paths import circular_path, fit_radius
 from rsart.render.raster import resolve_backend
 from rsart.render.runner import RenderJob, init_worker, pending_tasks, plan_object, render_task, write_plan
 from rsart.twin_io import read_twin, write_object
+
+from common import load_avg, machine, write_result
 
 TARGETS = {"simple": 15.0, "100k": 5.0}  # frames/s with 2 workers
 
@@ -157,9 +157,7 @@ def main() -> int:
     ap.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "render.json")
     args = ap.parse_args()
     results = {"benchmark": "render", "image": "640x480", "background": "booth", "sensor": False,
-               "rgb_backend": resolve_backend("auto"), "machine": {
-                   "cpus": os.cpu_count(), "python": sys.version.split()[0], "platform": platform.platform(),
-                   "load_avg_at_start": [round(x, 2) for x in os.getloadavg()]},
+               "rgb_backend": resolve_backend("auto"), "machine": machine(load_avg_at_start=load_avg()),
                "targets_fps_2_workers": TARGETS, "twins": {}}
     with tempfile.TemporaryDirectory() as tmp:
         for name, twin in (("simple", simple_twin()), ("100k", dense_twin())):
@@ -178,10 +176,8 @@ def main() -> int:
             rec["meets_target_steady"] = two["fps_steady"] >= TARGETS[name]
             rec["meets_target_projected_idle"] = two["fps_projected_idle"] >= TARGETS[name]
             results["twins"][name] = rec
-    results["load_avg_at_end"] = [round(x, 2) for x in os.getloadavg()]
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(results, indent=2) + "\n")
-    print(json.dumps(results, indent=2))
+    results["load_avg_at_end"] = load_avg()
+    write_result(args.out, results, echo=True)
     return 0
 
 
