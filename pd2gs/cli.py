@@ -10,6 +10,7 @@ Exit status 2 for invalid input (message names the path or option), no traceback
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 import time
@@ -19,11 +20,21 @@ from pathlib import Path
 import pd2gs  # noqa: F401  (sets OMP_WAIT_POLICY before torch loads)
 
 
-class UsageError(Exception):
+from pd2gs.config_cli import add_option, overrides, value  # noqa: E402
+from rsart.errors import RsartError  # noqa: E402
+
+
+class UsageError(RsartError):
     """Invalid command-line input."""
 
 
 def _parser() -> argparse.ArgumentParser:
+    """Options that set a config field are built from the field (pd2gs/config_cli.py): its type, choices,
+    default and docstring live in TrainConfig / DiscoveryConfig, nowhere else."""
+    from pd2gs.config import TrainConfig
+    from pd2gs.discovery.config import DiscoveryConfig
+
+    size = "x".join(map(str, TrainConfig().size))
     ap = argparse.ArgumentParser(prog="pd2gs", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -31,13 +42,9 @@ def _parser() -> argparse.ArgumentParser:
     t.add_argument("object_dir", help="RS-Art object folder (meta.json + states/*/cameras.json)")
     t.add_argument("--out", required=True, help="run folder (config.json, checkpoint.pt, metrics.json)")
     t.add_argument("--states", default=None, help="comma-separated state ids (default: all captured)")
-    t.add_argument("--iters", type=int, default=None, help="training iterations (default 3000)")
-    t.add_argument("--size", default="160x120", help="training image size WxH in pixels")
-    t.add_argument("--backend", default="cpu", choices=["cpu", "reference", "gsplat"])
-    t.add_argument("--seed", type=int, default=0)
-    t.add_argument("--init-points", type=int, default=None, help="initial Gaussians (default 5000)")
-    t.add_argument("--max-gaussians", type=int, default=None, help="densification cap (default 20000)")
-    t.add_argument("--depth-init", action="store_true", help="initialise from back-projected depth")
+    t.add_argument("--size", default=None, help=f"training image size WxH in pixels (default {size})")
+    for name in ("iters", "backend", "seed", "init_points", "max_gaussians", "depth_init"):
+        add_option(t, TrainConfig, name)
     t.add_argument("--resume", action="store_true", help="continue the run in --out")
     t.add_argument("--overwrite", action="store_true", help="start over even if --out holds a run")
     t.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -48,13 +55,13 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--t", type=float, default=None, help="interpolation weight in [0, 1] (needs --to)")
     r.add_argument("--frames", type=int, default=9, help="GIF frames when --to is given without --t")
     r.add_argument("--views", type=int, default=4, help="cameras in the image strip")
-    r.add_argument("--backend", default="cpu", choices=["cpu", "reference", "gsplat"])
+    add_option(r, TrainConfig, "backend")
     r.add_argument("--out", default=None, help="output folder (default RUN/renders)")
     e = sub.add_parser("eval", help="PSNR on unseen states by latent interpolation")
     e.add_argument("run", help="run folder written by pd2gs train")
     e.add_argument("--object", required=True, help="RS-Art object folder holding the unseen states")
     e.add_argument("--unseen", required=True, help="comma-separated unseen state ids")
-    e.add_argument("--backend", default="cpu", choices=["cpu", "reference", "gsplat"])
+    add_option(e, TrainConfig, "backend")
     u = sub.add_parser("run", help="end to end: train -> parts -> joints -> meshes -> rsart-submission/1",
                        description="Run PD²GS on every object of a dataset (or one object folder) and write "
                                    "OUT/submission/submission.json for rsart-eval; training runs go to OUT/runs/. "
@@ -63,16 +70,12 @@ def _parser() -> argparse.ArgumentParser:
     u.add_argument("--objects", default=None, help="comma-separated object ids (default: all, or --split)")
     u.add_argument("--split", default=None, help="a split of index.json")
     u.add_argument("--out", required=True, help="output folder")
-    u.add_argument("--iters", type=int, default=None, help="training iterations (default 3000)")
-    u.add_argument("--size", default="160x120", help="training image size WxH")
-    u.add_argument("--counter", default=None, choices=["trajectory", "motion", "vlm", "given"],
-                   help="part counter (default trajectory)")
-    u.add_argument("--joint-rule", default=None, choices=["bic", "paper"], help="joint-type rule (default bic)")
-    u.add_argument("--no-refine", action="store_true", help="ablation: skip boundary-aware refinement")
-    u.add_argument("--no-articulate", action="store_true",
-                   help="ablation: the paper's centre-based joints, without our photometric articulation fit")
-    u.add_argument("--mask-provider", default=None, choices=["grabcut", "sam", "oracle"])
-    u.add_argument("--n-states", type=int, default=None, help="ablation: use 2 states instead of all")
+    add_option(u, TrainConfig, "iters")
+    u.add_argument("--size", default=None, help=f"training image size WxH (default {size})")
+    for name in ("counter", "joint_rule", "mask_provider", "n_states"):
+        add_option(u, DiscoveryConfig, name)
+    for name in ("refine", "articulate"):
+        add_option(u, DiscoveryConfig, name, negate=True)
     u.add_argument("--quiet", action="store_true", help="no progress bars")
     return ap
 
@@ -80,7 +83,7 @@ def _parser() -> argparse.ArgumentParser:
 def _eval(args) -> int:
     from pd2gs.data import load_frames
     from pd2gs.evaluate import eval_unseen
-    from pd2gs.train import load_field, write_json_atomic
+    from pd2gs.train import TrainConfig, load_field, write_json_atomic
 
     run = Path(args.run)
     if not (run / "checkpoint.pt").is_file():
@@ -89,7 +92,8 @@ def _eval(args) -> int:
     ids, frames = load_frames(args.object, args.unseen.split(","), cfg.size)
     res = {}
     for k, sid in enumerate(ids):
-        res[sid] = eval_unseen(fld, [f for f in frames if f.state == k], cfg.background, args.backend)
+        res[sid] = eval_unseen(fld, [f for f in frames if f.state == k], cfg.background,
+                               value(args, TrainConfig, "backend"))
         print(f"{sid}: PSNR {res[sid]['psnr']:.2f} dB (latent between states "
               f"{cfg.states[res[sid]['segment'][0]]} and {cfg.states[res[sid]['segment'][1]]}, t = {res[sid]['t']:.1f})")
     write_json_atomic(run / "unseen.json", res)
@@ -97,7 +101,7 @@ def _eval(args) -> int:
 
 
 def _train(args) -> int:
-    from pd2gs.data import DataError, load_frames, parse_size
+    from pd2gs.data import load_frames, parse_size
     from pd2gs.render.gsplat_backend import gsplat_status
     from pd2gs.train import TrainConfig, Trainer, write_json_atomic
 
@@ -109,26 +113,19 @@ def _train(args) -> int:
         raise UsageError(f"{run}: already holds a run; pass --resume to continue or --overwrite")
     if args.resume and not has_run:
         raise UsageError(f"{run}: --resume given but there is no checkpoint.pt")
-    if args.backend == "gsplat" and gsplat_status():
+    if value(args, TrainConfig, "backend") == "gsplat" and gsplat_status():
         raise UsageError(gsplat_status())
+    over = overrides(args, TrainConfig)
     if args.resume:
         cfg = TrainConfig.from_json(json.loads((run / "config.json").read_text()))
-        if args.iters is not None:
-            cfg.iters = args.iters
+        if "iters" in over:  # a resumed run keeps its settings; only its length may change
+            cfg = dataclasses.replace(cfg, iters=over["iters"])
     else:
-        cfg = TrainConfig(object_dir=str(Path(args.object_dir)), size=parse_size(args.size),
-                          backend=args.backend, seed=args.seed, depth_init=args.depth_init)
-        for name, val in (("iters", args.iters), ("init_points", args.init_points),
-                          ("max_gaussians", args.max_gaussians)):
-            if val is not None:
-                if val <= 0:
-                    raise UsageError(f"--{name.replace('_', '-')} must be positive, got {val}")
-                setattr(cfg, name, val)
+        if args.size:
+            over["size"] = parse_size(args.size)
+        cfg = TrainConfig(object_dir=str(Path(args.object_dir)), **over)
     states = args.states.split(",") if (args.states and not args.resume) else (cfg.states or None)
-    try:
-        cfg.states, frames = load_frames(cfg.object_dir, states, cfg.size, with_depth=cfg.depth_init)
-    except DataError as e:
-        raise UsageError(str(e)) from None
+    cfg.states, frames = load_frames(cfg.object_dir, states, cfg.size, with_depth=cfg.depth_init)
     trainer = Trainer(cfg, frames, run)
     if args.resume:
         trainer.load_state_dict(torch.load(run / "checkpoint.pt", weights_only=False))
@@ -151,7 +148,7 @@ def _render(args) -> int:
     import torch
 
     from pd2gs.data import Frame
-    from pd2gs.train import load_field, render_frame
+    from pd2gs.train import TrainConfig, load_field, render_frame
     from pd2gs.viz import write_gif, write_strip
 
     run = Path(args.run)
@@ -161,6 +158,7 @@ def _render(args) -> int:
     for sid in filter(None, [args.state, args.to]):
         if sid not in cfg.states:
             raise UsageError(f"unknown state {sid!r}; the run was trained on {', '.join(cfg.states)}")
+    backend = value(args, TrainConfig, "backend")
     if args.t is not None and (args.to is None or not 0.0 <= args.t <= 1.0):
         raise UsageError("--t needs --to and must lie in [0, 1]")
     cams = json.loads((run / "cameras.json").read_text())
@@ -175,7 +173,7 @@ def _render(args) -> int:
 
     @torch.no_grad()
     def image(latent, frame):
-        o = render_frame(fld, latent, frame, cfg.background, args.backend)
+        o = render_frame(fld, latent, frame, cfg.background, backend)
         return (o.rgb.clamp(0, 1).numpy() * 255 + 0.5).astype(np.uint8)
 
     if args.to is None or args.t is not None:
@@ -194,54 +192,36 @@ def _render(args) -> int:
 
 
 def _run(args) -> int:
-    import dataclasses
-
     from pd2gs.data import parse_size
     from pd2gs.discovery.config import DiscoveryConfig
     from pd2gs.run import run
     from pd2gs.train import TrainConfig
-    from rsart.errors import RsartError
 
-    tcfg = TrainConfig(size=parse_size(args.size))
-    if args.iters is not None:
-        if args.iters <= 0:
-            raise UsageError(f"--iters must be positive, got {args.iters}")
-        tcfg.iters = args.iters
-    over = {k: v for k, v in (("counter", args.counter), ("joint_rule", args.joint_rule),
-                              ("mask_provider", args.mask_provider), ("n_states", args.n_states)) if v is not None}
-    if args.no_refine:
-        over["refine"] = False
-    if args.no_articulate:
-        over["articulate"] = False
-    try:
-        dcfg = dataclasses.replace(DiscoveryConfig(), **over)
-    except ValueError as e:
-        raise UsageError(str(e)) from None
+    over = overrides(args, TrainConfig)
+    if args.size:
+        over["size"] = parse_size(args.size)
+    tcfg = TrainConfig(**over)
+    dcfg = DiscoveryConfig(**overrides(args, DiscoveryConfig))
     objects = [o for o in args.objects.split(",") if o] if args.objects else None
     try:
         sub = run(args.data, args.out, objects=objects, split=args.split, train_cfg=tcfg, discovery_cfg=dcfg,
                   progress=not args.quiet)
-    except (RsartError, KeyError) as e:
+    except KeyError as e:
         raise UsageError(str(e)) from None
     print(f"wrote {sub}; score it with: rsart-eval {sub} --data {args.data}")
     return 0
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of the ``pd2gs`` console script."""
+    """Entry point of the ``pd2gs`` console script. Every error pd2gs raises on purpose is an
+    :class:`~rsart.errors.RsartError`: printed here without a traceback, exit status 2."""
     args = _parser().parse_args(argv)  # --help stays fast: torch loads only for a command
-    from rsart.extras import MissingExtra, require
+    from rsart.extras import require
 
     try:
-        require("pd2gs", f"pd2gs {args.cmd}")
-    except MissingExtra as e:
-        print(f"pd2gs: error: {e}", file=sys.stderr)
-        return 2
-    from pd2gs.data import DataError
-
-    try:
+        require("pd2gs", f"pd2gs {args.cmd}")  # a missing extra is an RsartError like the others
         return {"train": _train, "render": _render, "eval": _eval, "run": _run}[args.cmd](args)
-    except (UsageError, DataError) as e:
+    except RsartError as e:
         print(f"pd2gs: error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

@@ -12,9 +12,10 @@ import numpy as np
 import torch
 
 from rsart.camera import pinhole_unproject
+from rsart.errors import RsartError
 
 
-class DataError(ValueError):
+class DataError(RsartError, ValueError):
     """Invalid training input (message names the path or field)."""
 
 

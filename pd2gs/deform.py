@@ -14,26 +14,8 @@ from dataclasses import dataclass
 import torch
 from torch import nn
 
+from pd2gs.config import DeformConfig  # noqa: F401  (its home is pd2gs/config.py; imported from here too)
 from pd2gs.gaussians import CanonicalGaussians
-
-
-@dataclass
-class DeformConfig:
-    """Network size (chosen for a 2-core CPU; see docs/pd2gs.md)."""
-
-    latent_dim: int = 32
-    hidden: int = 64
-    layers: int = 3
-    pe_freqs: int = 6
-    # hidden activation: "leaky" (ours: LeakyReLU with negative slope ``leaky_slope``) or "relu". With
-    # ReLU the last hidden layer died on the eyeglasses (0-4 of 64 units ever active, every state the
-    # same deformation, temples lost: 21.9 dB); LeakyReLU: 29.9 dB, temples moving (docs/pd2gs.md)
-    activation: str = "leaky"
-    leaky_slope: float = 0.01
-
-    def __post_init__(self) -> None:
-        if self.activation not in ("relu", "leaky"):
-            raise ValueError(f"DeformConfig.activation must be 'relu' or 'leaky', got {self.activation!r}")
 
 
 def positional_encoding(x: torch.Tensor, freqs: int) -> torch.Tensor:

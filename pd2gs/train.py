@@ -6,95 +6,24 @@ Deterministic given ``seed`` (fixed thread count, deterministic kernels, seeded 
 """
 from __future__ import annotations
 
-import dataclasses
 import json
 import math
 import random
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 import torch
 
+from pd2gs.config import TrainConfig  # noqa: F401  (its home is pd2gs/config.py; imported from here too)
 from pd2gs.data import Frame, backproject_frames, camera_bounds, object_bounds
-from pd2gs.deform import DeformableField, DeformConfig, DeformedGaussians
+from pd2gs.deform import DeformableField, DeformedGaussians
 from pd2gs.densify import DensifyStats, densify_and_prune, reset_opacity
 from pd2gs.gaussians import init_from_bounds, init_from_points
 from pd2gs.losses import photometric_loss, psnr
 from pd2gs.render import rasterize
 from pd2gs.rigidity import NeighbourGraph, isometry_loss, knn_graph
 from rsart.io import write_json
-
-
-@dataclass
-class TrainConfig:
-    """Everything that defines a run (saved as RUN/config.json)."""
-
-    object_dir: str = ""
-    states: list[str] = field(default_factory=list)
-    size: tuple[int, int] = (160, 120)
-    iters: int = 3000
-    backend: str = "cpu"
-    seed: int = 0
-    init_points: int = 5000
-    depth_init: bool = False
-    # "hull" (default): the union of the per-state RGB-only visual hulls (ours, pd2gs/hull.py) | "hull0": the
-    # hull of the first state only | "box": uniform in the box. Without the hull prior below, the hull start
-    # measured worse than the box on the suite (benchmarks/results/pd2gs-rsart-synth-init-hull.md); with it,
-    # it is what makes thin objects train (docs/pd2gs.md "Thin objects")
-    init: str = "hull"
-    init_union_frac: float = 0.0  # init="hull0": this fraction of the points comes from the union hull
-    background: tuple[float, float, float] | None = None  # None: estimated from image borders
-    deform: DeformConfig = field(default_factory=DeformConfig)
-    lambda_dssim: float = 0.2
-    lr_means: float = 1.6e-3  # x scene extent, decays x0.01 over the run
-    lr_log_scales: float = 5e-3
-    lr_quats: float = 1e-3
-    lr_colors: float = 1e-2
-    lr_opacity: float = 5e-2
-    lr_mlp: float = 5e-3  # decays x0.1 over the run (5e-3 measured better than 1e-3 on storage-0001)
-    lr_latents: float = 1e-2
-    densify_from: int = 300
-    densify_until_frac: float = 0.6
-    densify_every: int = 100
-    densify_grad: float = 2e-4
-    percent_dense: float = 0.01
-    min_opacity: float = 0.005
-    max_gaussians: int = 20000
-    opacity_reset_every: int = 1000
-    checkpoint_every: int = 500
-    threads: int = 2
-    # ours (not in the paper; see docs/pd2gs.md "Training schedule"): states join one at a time in the
-    # order given, each new latent starting from its predecessor's, all active by curriculum_frac * iters
-    curriculum: bool = False  # measured worse on storage-0001 (docs/pd2gs.md)
-    curriculum_frac: float = 0.4
-    # ours: local isometry prior on the deformation (pd2gs/rigidity.py); 0 disables it
-    rigidity_weight: float = 0.05  # 0.2 and 0.02 measured worse on storage-0001 without the hull prior;
-    # 0.05 with it kept the eyeglasses' temples from sliding along themselves (docs/pd2gs.md "Thin objects")
-    rigidity_k: int = 8
-    # ours: L1 penalty on the per-state log-scale offsets (parts move rigidly, they do not grow or shrink)
-    scale_reg_weight: float = 1.0
-    # ours: per-state visual-hull prior (pd2gs/hull.py HullPrior; docs/pd2gs.md "Thin objects"): mean
-    # distance of the state's centres to its hull (hull_weight) and of hull voxels to the nearest opaque
-    # Gaussian (hull_cover_weight), both fading linearly to 0 at hull_until_frac * iters
-    hull_weight: float = 1.0
-    hull_cover_weight: float = 1.0
-    hull_until_frac: float = 0.8
-    hull_resolution: int = 64
-    hull_dilate: int = 1  # grow the foreground masks by this many pixels before carving
-
-    @staticmethod
-    def from_json(d: dict) -> "TrainConfig":
-        d = dict(d)
-        d["deform"] = DeformConfig(**{"activation": "relu", **d.get("deform", {})})  # configs from before `activation` existed: ReLU
-        d["size"] = tuple(d["size"])
-        if d.get("background") is not None:
-            d["background"] = tuple(d["background"])
-        for key in ("hull_weight", "hull_cover_weight"):  # runs written before the prior existed
-            d.setdefault(key, 0.0)
-        d.setdefault("hull_dilate", 0)
-        names = {f.name for f in dataclasses.fields(TrainConfig)}
-        return TrainConfig(**{k: v for k, v in d.items() if k in names})
 
 
 def estimate_background(frames: list[Frame]) -> tuple[float, float, float]:

@@ -23,12 +23,9 @@ Ablation switches (docs/pd2gs-parts.md has the table):
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
+from typing import Literal
 
-COUNTERS = ("trajectory", "motion", "vlm", "given")
-MASK_PROVIDERS = ("grabcut", "sam", "oracle")
-JOINT_RULES = ("paper", "bic")
-CLUSTERINGS = ("trajectory", "rigid")
-ARTICULATE_REFS = ("start", "end")
+from ..config_cli import ConfigError, check_choices
 
 
 @dataclass
@@ -39,11 +36,17 @@ class VLMConfig:
     """
 
     url: str = ""
+    """the full .../chat/completions URL."""
     model: str = "gpt-4o"
+    """model name sent with each request."""
     api_key_env: str = "OPENAI_API_KEY"
+    """environment variable holding the API key."""
     n_pairs: int = 5
+    """image pairs shown to the model."""
     timeout_s: float = 60.0
+    """seconds per request."""
     seed: int = 0
+    """seed of the pair choice."""
 
 
 @dataclass
@@ -51,97 +54,148 @@ class DiscoveryConfig:
     """Every knob of ``pd2gs.discovery.pipeline.discover``."""
 
     # --- coarse segmentation (paper Sec. 3.3)
-    tau_mot: float = 0.15            # ours: fraction of the largest displacement that counts as motion
-    min_cluster_frac: float = 0.02   # paper: clusters < 2 % of dynamic Gaussians are merged
+    tau_mot: float = 0.15
+    """ours: fraction of the largest displacement that counts as motion."""
+    min_cluster_frac: float = 0.02
+    """paper: clusters < 2 % of dynamic Gaussians are merged."""
     kmeans_seed: int = 0
+    """seed of k-means."""
     kmeans_n_init: int = 10
-    n_states: int | None = None      # ablation: 2 or 4 states (None = all states of the field)
-    cluster: str = "trajectory"      # "trajectory": paper's descriptor + k-means; "rigid": ours, by rigid motion
-    split_disconnected: bool = False  # ours: split clusters into spatially connected pieces (parts that
-                                      # always move together, e.g. equal drawers in multi-part states)
+    """k-means restarts."""
+    n_states: int | None = None
+    """ablation: 2 or 4 states (None = all states of the field)."""
+    cluster: Literal["trajectory", "rigid"] = "trajectory"
+    """"trajectory": the paper's descriptor + k-means; "rigid": ours, by rigid motion."""
+    split_disconnected: bool = False
+    """ours: split clusters into spatially connected pieces (parts that always move together, e.g. equal
+    drawers in multi-part states)."""
 
     # --- how many parts
-    counter: str = "trajectory"  # trajectory: local rigid motions + silhouette (default); motion: rigid RANSAC
-    count_min_opacity: float = 0.3   # ours: only Gaussians at least this opaque vote on the part count
-    min_silhouette: float = 0.35     # ours: below it, one movable part (chosen on two trained demo fields, see docs)
-    given_count: int | None = None   # for counter="given" (pipeline fills it from meta.json)
+    counter: Literal["trajectory", "motion", "vlm", "given"] = "trajectory"
+    """part counter: "trajectory" local rigid motions + silhouette (default, ours); "motion" rigid RANSAC
+    (ours); "vlm" the paper's; "given" the oracle count from meta.json."""
+    count_min_opacity: float = 0.3
+    """ours: only Gaussians at least this opaque vote on the part count."""
+    min_silhouette: float = 0.35
+    """ours: below it, one movable part (chosen on two trained demo fields, see docs)."""
+    given_count: int | None = None
+    """for counter="given" (the pipeline fills it from meta.json)."""
     max_parts: int = 8
-    ransac_thresh_rel: float = 0.05  # ours: inlier distance as a fraction of the largest displacement
+    """most movable parts a counter may return."""
+    ransac_thresh_rel: float = 0.05
+    """ours: inlier distance as a fraction of the largest displacement."""
     ransac_iters: int = 300
-    min_part_frac: float = 0.05      # ours: a rigid motion needs this fraction of dynamic Gaussians
+    """RANSAC iterations per rigid motion."""
+    min_part_frac: float = 0.05
+    """ours: a rigid motion needs this fraction of dynamic Gaussians."""
     vlm: VLMConfig = field(default_factory=VLMConfig)
+    """the endpoint of counter="vlm"."""
 
     # --- refinement (paper Sec. 3.4, App. A.1)
     refine: bool = True
-    tau_vis: float = 2.0             # ours: winner margin w_p / (max_q w_q + eps)
+    """SAM-prompted refinement + boundary-aware splitting (False: the ablation without it)."""
+    tau_vis: float = 2.0
+    """ours: winner margin w_p / (max_q w_q + eps)."""
     vis_eps: float = 1e-6
-    n_pos: int = 10                  # paper
-    n_neg: int = 20                  # paper
-    mask_provider: str = "grabcut"
+    """the eps of that margin."""
+    n_pos: int = 10
+    """paper: positive prompts per part."""
+    n_neg: int = 20
+    """paper: negative prompts per part."""
+    mask_provider: Literal["grabcut", "sam", "oracle"] = "grabcut"
+    """part masks from "grabcut" (default), "sam" (segment_anything + a local checkpoint) or "oracle" (the
+    dataset's true part masks)."""
     sam_checkpoint: str | None = None
+    """path of a local SAM .pth file (mask_provider="sam")."""
     sam_model_type: str = "vit_b"
+    """SAM model type of that checkpoint."""
     grabcut_iters: int = 5
-    refine_views: int = 8            # views per state used for prompts/masks (evenly spaced)
-    axis_sigma: float = 2.0          # ours: ellipse extent = axis_sigma standard deviations
-    min_split_scale: float = 2e-3    # ours: stop splitting below this std-dev (scene units)
+    """GrabCut iterations per mask."""
+    refine_views: int = 8
+    """views per state used for prompts/masks (evenly spaced)."""
+    axis_sigma: float = 2.0
+    """ours: ellipse extent = axis_sigma standard deviations."""
+    min_split_scale: float = 2e-3
+    """ours: stop splitting below this std-dev (scene units)."""
     max_splits: int = 20000
+    """most Gaussians split at a boundary."""
     vote_views: int = 5
-    vote_depth_tol_rel: float = 0.01  # ours: a view votes only if the child is within this (x extent) of the
-                                      # rendered surface (occluded Gaussians take no label from the masks)
-    finetune: bool = True            # fine-tune children's rotation + opacity (needs the rasterizer)
+    """views that vote on each child's label."""
+    vote_depth_tol_rel: float = 0.01
+    """ours: a view votes only if the child is within this (x extent) of the rendered surface (occluded
+    Gaussians take no label from the masks)."""
+    finetune: bool = True
+    """fine-tune children's rotation + opacity (needs the rasterizer)."""
     finetune_iters: int = 200
+    """fine-tuning steps."""
     finetune_lr: float = 0.01
-    background: tuple[float, float, float] | None = None  # the trainer's render background (None = black)
+    """fine-tuning learning rate."""
+    background: tuple[float, float, float] | None = None
+    """the trainer's render background (None = black)."""
 
     # --- kinematics (paper App. A.3, A.4)
-    joint_rule: str = "bic"  # measured better than "paper" (docs/pd2gs-parts.md); both verdicts are always reported
-    paper_r_thresh: float = 0.05     # paper: r = (s2 + s3) / s1 < 0.05 -> revolute
-    bic_noise_rel: float = 1e-3      # ours: noise floor of the BIC rule (fraction of the part extent)
-    robust_thresh_rel: float = 0.02  # ours: RANSAC inlier threshold (fraction of the part extent)
+    joint_rule: Literal["paper", "bic"] = "bic"
+    """joint-type rule: "paper" (residual rank) or "bic" (ours: translation vs rotation by BIC); "bic"
+    measured better (docs/pd2gs-parts.md); both verdicts are always reported."""
+    paper_r_thresh: float = 0.05
+    """paper: r = (s2 + s3) / s1 < 0.05 -> revolute."""
+    bic_noise_rel: float = 1e-3
+    """ours: noise floor of the BIC rule (fraction of the part extent)."""
+    robust_thresh_rel: float = 0.02
+    """ours: RANSAC inlier threshold (fraction of the part extent)."""
     robust_iters: int = 200
-    # ours: refine every joint (and its type) by rendering the rigidly articulated reference field against
-    # the training images (pd2gs/discovery/articulate.py); False = the paper's centre-based joints only
+    """RANSAC iterations of the rigid fit."""
     articulate: bool = True
-    articulate_iters: int = 300      # Adam steps per fit (the type trial fits once more per part)
-    articulate_views: int = 24       # training views per state (evenly spaced)
-    articulate_max_side: int = 160   # those views are rendered at most this large (the trainer's size)
-    articulate_ref: str = "start"    # ours: the state whose Gaussians are articulated ("start" | "end"): the
-                                     # static base's, and every part's when part_ref is off
-    part_ref: bool = True            # ours: each part's Gaussians from the state whose views show it best (a
-                                     # drawer's inside is hidden while it is closed, so its field there is a guess)
-    relabel: bool = True             # ours: after the fit, relabel Gaussians by multi-view colour consistency
-                                     # under each part's motion, then re-fit the joints
-    chain: bool = True               # ours: try each part as hanging from a touching movable part
-    absorb: bool = True              # ours: a cluster whose pixels another cluster's joint (or none) renders as
-                                     # well joins it, and touching clusters one re-fitted joint moves as well merge
-                                     # (over-split parts, still clusters; pd2gs/discovery/consolidate.py)
-    absorb_margin: float = 0.02      # ours: "as well" = at most this much worse (relative colour error)
+    """ours: refine every joint (and its type) by rendering the rigidly articulated reference field against
+    the training images (pd2gs/discovery/articulate.py); False = the paper's centre-based joints only."""
+    articulate_iters: int = 300
+    """Adam steps per fit (the type trial fits once more per part)."""
+    articulate_views: int = 24
+    """training views per state (evenly spaced)."""
+    articulate_max_side: int = 160
+    """those views are rendered at most this large (the trainer's size)."""
+    articulate_ref: Literal["start", "end"] = "start"
+    """ours: the state whose Gaussians are articulated: the static base's, and every part's when part_ref
+    is off."""
+    part_ref: bool = True
+    """ours: each part's Gaussians from the state whose views show it best (a drawer's inside is hidden
+    while it is closed, so its field there is a guess)."""
+    relabel: bool = True
+    """ours: after the fit, relabel Gaussians by multi-view colour consistency under each part's motion,
+    then re-fit the joints."""
+    chain: bool = True
+    """ours: try each part as hanging from a touching movable part."""
+    absorb: bool = True
+    """ours: a cluster whose pixels another cluster's joint (or none) renders as well joins it, and touching
+    clusters one re-fitted joint moves as well merge (over-split parts, still clusters;
+    pd2gs/discovery/consolidate.py)."""
+    absorb_margin: float = 0.02
+    """ours: "as well" = at most this much worse (relative colour error)."""
 
     # --- meshing (paper App. A.2)
-    voxel_size: float | None = None  # None: object extent / 128
+    voxel_size: float | None = None
+    """TSDF voxel size; None: object extent / 128."""
     sdf_trunc_voxels: float = 4.0
-    depth_alpha_min: float = 0.5     # pixels whose part alpha is lower carry no depth
-    mesh_states: str = "start,end"   # states whose meshes are written
-    mesh_views: int = 24             # train views per state rendered for TSDF fusion (evenly spaced)
-    max_image_side: int = 320        # views are rendered/segmented at most this large (intrinsics scaled)
-    render_backend: str = "cpu"
+    """TSDF truncation in voxels."""
+    depth_alpha_min: float = 0.5
+    """pixels whose part alpha is lower carry no depth."""
+    mesh_states: str = "start,end"
+    """states whose meshes are written."""
+    mesh_views: int = 24
+    """train views per state rendered for TSDF fusion (evenly spaced)."""
+    max_image_side: int = 320
+    """views are rendered/segmented at most this large (intrinsics scaled)."""
+    render_backend: Literal["cpu", "reference", "gsplat"] = "cpu"
+    """rasterizer of the discovery renders."""
     seed: int = 0
+    """seed of every random choice of the discovery."""
 
     def __post_init__(self) -> None:
-        if self.cluster not in CLUSTERINGS:
-            raise ValueError(f"cluster={self.cluster!r}: choose one of {CLUSTERINGS}")
-        if self.counter not in COUNTERS:
-            raise ValueError(f"counter={self.counter!r}: choose one of {COUNTERS}")
-        if self.mask_provider not in MASK_PROVIDERS:
-            raise ValueError(f"mask_provider={self.mask_provider!r}: choose one of {MASK_PROVIDERS}")
-        if self.articulate_ref not in ARTICULATE_REFS:
-            raise ValueError(f"articulate_ref={self.articulate_ref!r}: choose one of {ARTICULATE_REFS}")
-        if self.joint_rule not in JOINT_RULES:
-            raise ValueError(f"joint_rule={self.joint_rule!r}: choose one of {JOINT_RULES}")
+        check_choices(self)
         if self.n_states is not None and self.n_states < 2:
-            raise ValueError("n_states must be >= 2 (motion needs two states)")
+            raise ConfigError("n_states must be >= 2 (motion needs two states)")
         if not 0.0 <= self.tau_mot <= 1.0:
-            raise ValueError("tau_mot must lie in [0, 1]")
+            raise ConfigError("tau_mot must lie in [0, 1]")
 
     def to_dict(self) -> dict:
         return asdict(self)

@@ -24,6 +24,8 @@ import numpy as np
 from PIL import Image
 from scipy.spatial import cKDTree
 
+from rsart.errors import RsartError
+
 from .kinematics import kabsch
 
 PROMPT = ("Compare the two images. How many components moved? "
@@ -31,7 +33,7 @@ PROMPT = ("Compare the two images. How many components moved? "
 _ANSWER = re.compile(r"number\s+of\s+moved\s+components\s*:\s*\[?\s*(\d+)\s*\]?", re.IGNORECASE)
 
 
-class CountError(RuntimeError):
+class CountError(RsartError, RuntimeError):
     """The part count could not be determined (message says why)."""
 
 

@@ -15,6 +15,8 @@ from typing import Callable
 import cv2
 import numpy as np
 
+from rsart.errors import RsartError
+
 
 def visibility_sets(label_weights: np.ndarray, part: int, tau_vis: float, eps: float = 1e-6
                     ) -> tuple[np.ndarray, np.ndarray]:
@@ -62,6 +64,10 @@ def sample_prompts(pos: np.ndarray, neg: np.ndarray, n_pos: int = 10, n_neg: int
 MaskProvider = Callable[..., np.ndarray]
 
 
+class MaskProviderError(RsartError, RuntimeError):
+    """A mask provider cannot run as configured (missing package, checkpoint or true masks)."""
+
+
 @dataclass
 class GrabCutProvider:
     """GrabCut seeded by the prompts: disks of ``radius`` px around positives = foreground, around
@@ -98,13 +104,13 @@ class SamProvider:
         try:
             from segment_anything import SamPredictor, sam_model_registry
         except ImportError:
-            raise RuntimeError("mask_provider='sam' needs the segment_anything package "
+            raise MaskProviderError("mask_provider='sam' needs the segment_anything package "
                                "(pip install segment-anything) and sam_checkpoint=<local .pth>") from None
         if not checkpoint:
-            raise RuntimeError("mask_provider='sam' needs sam_checkpoint=<path to a local SAM .pth file>")
+            raise MaskProviderError("mask_provider='sam' needs sam_checkpoint=<path to a local SAM .pth file>")
         from pathlib import Path
         if not Path(checkpoint).is_file():
-            raise RuntimeError(f"SAM checkpoint {checkpoint} does not exist")
+            raise MaskProviderError(f"SAM checkpoint {checkpoint} does not exist")
         self.predictor = SamPredictor(sam_model_registry[model_type](checkpoint=checkpoint))
         self._key = None
 
@@ -127,7 +133,7 @@ class OracleProvider:
     def __call__(self, rgb: np.ndarray, pos_uv: np.ndarray, neg_uv: np.ndarray, *, support: np.ndarray,
                  true_mask: np.ndarray | None = None, **_) -> np.ndarray:
         if true_mask is None:
-            raise RuntimeError("mask_provider='oracle' needs the dataset's part masks (states/<s>/mask/)")
+            raise MaskProviderError("mask_provider='oracle' needs the dataset's part masks (states/<s>/mask/)")
         vals = true_mask[support & (true_mask > 0)]
         if vals.size == 0:
             return np.zeros(true_mask.shape, dtype=bool)

@@ -17,6 +17,7 @@ from typing import Any, Mapping
 import numpy as np
 import trimesh
 
+from rsart.errors import RsartError
 from rsart.io import atomic_dir, atomic_write_bytes, write_json
 
 from .kinematics import JointFit
@@ -46,7 +47,7 @@ class ObjectResult:
     field: Any = None  # the refined, labelled StateField (for pictures); not written
 
 
-class ObjectFailure(Exception):
+class ObjectFailure(RsartError):
     """A failed object with its reason (what ``discover`` returns through the pipeline's safe wrapper)."""
 
 

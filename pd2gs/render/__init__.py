@@ -22,11 +22,12 @@ from dataclasses import dataclass
 import torch
 
 from pd2gs.render.projection import Projected, project_gaussians
+from rsart.errors import RsartError
 
 BACKENDS = ("cpu", "reference", "gsplat")
 
 
-class BackendUnavailable(RuntimeError):
+class BackendUnavailable(RsartError, RuntimeError):
     """The requested backend cannot run on this machine (message says why and what to use)."""
 
 
