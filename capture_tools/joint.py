@@ -37,7 +37,8 @@ from rsart.errors import RsartError
 from rsart.kinematics import Twin
 
 from .depth_align import view_points
-from .pipeline import CaptureSettings, StateRecon, StateResult, estimate_poses, place_state
+from .pipeline import (CaptureSettings, StateRecon, StateResult, estimate_poses, finish_state, pedestal_step,
+                       place_state, registration_step)
 from .register import Registration, outer_surface_samples
 
 
@@ -138,8 +139,9 @@ def process_joint(recons: list[StateRecon], ids: list[str], intr: Intrinsics, tw
     if len(recons) < 2:
         return [place_state(rc, intr, twin, v, settings) for rc, v in zip(recons, values)], \
             {"used": False, "reason": "one state"}
-    per_state = [place_state(rc, intr, twin, v, settings, part_masks=False) for rc, v in zip(recons, values)]
-    Ts = [r.registration.T for r in per_state]
+    peds = [pedestal_step(rc, intr) for rc in recons]
+    regs = [registration_step(p, twin, v, settings) for p, v in zip(peds, values)]
+    Ts = [r.T for r in regs]
     clouds = [fused_points(rc, intr) for rc in recons]
     to_ref = [Ts[0] @ np.linalg.inv(T) for T in Ts]
     static = static_masks(recons, ids, to_ref, clouds, intr)
@@ -157,19 +159,19 @@ def process_joint(recons: list[StateRecon], ids: list[str], intr: Intrinsics, tw
                                    for rc, sid in zip(recons, ids)}, registered_per_state=per_reg)
     if min(per_reg.values()) < 3 or sum(per_reg.values()) < sum(len(rc.frames) for rc in recons):
         report.update(used=False, reason="the joint model left frames out; per-state poses kept")
-        return [place_state(rc, intr, twin, v, settings) for rc, v in zip(recons, values)], report
+        return [finish_state(rc, intr, twin, v, p, r) for rc, v, p, r in zip(recons, values, peds, regs)], report
     joint = [StateRecon([f for f in rc.frames if rc.names[f.name] in c2w], rc.names, rc.keyed,
                         {n: M for n, M in c2w.items() if groups[n] == sid}, {**rc.report, "joint_sfm": True})
              for rc, sid in zip(recons, ids)]
-    first = [place_state(rc, intr, twin, v, settings, part_masks=False) for rc, v in zip(joint, values)]
-    best = max(range(len(first)), key=lambda i: first[i].registration.fitness)
+    peds = [pedestal_step(rc, intr) for rc in joint]
+    first = [registration_step(p, twin, v, settings) for p, v in zip(peds, values)]
+    best = max(range(len(first)), key=lambda i: first[i].fitness)
     meshes = [twin.whole_mesh(v) for v in values]
-    obj = [np.concatenate([view_points(intr, f.depth, r.masks[f.name], c2w[rc.names[f.name]], 2) for f in r.frames])
-           for r, rc in zip(first, joint)]
-    T = register_twin_joint(meshes, obj, first[best].registration.T, seed=settings.seed)
+    T = register_twin_joint(meshes, [p.object_points for p in peds], first[best].T, seed=settings.seed)
     report.update(used=True, registration_seed_state=ids[best])
-    shared = Registration(T, 0.0, 0.0, first[best].registration.coarse_fitness)  # residuals computed per state
-    out = [place_state(rc, intr, twin, v, settings, registration=shared) for rc, v in zip(joint, values)]
+    shared = Registration(T, 0.0, 0.0, first[best].coarse_fitness)  # residuals computed per state
+    out = [finish_state(rc, intr, twin, v, p, registration_step(p, twin, v, settings, shared=shared))
+           for rc, v, p in zip(joint, values, peds)]
     return out, report
 
 

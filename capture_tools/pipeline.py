@@ -13,7 +13,9 @@
 4. twin registration (FPFH + RANSAC, ICP) of the twin posed at the state's joint values to the
    fused object depth; cameras moved into the object (twin base) frame;
 5. part masks: the registered twin ray-cast per view (part index + 1) inside the chroma-key mask;
-   keyed pixels the twin misses take the nearest part label (:func:`place_state` = steps 3-5).
+   keyed pixels the twin misses take the nearest part label (:func:`place_state` = steps 3-5, each a
+   function of its own: :func:`pedestal_step`, :func:`registration_step`, :func:`object_frame_step`,
+   :func:`part_masks_from_twin`).
 """
 from __future__ import annotations
 
@@ -183,18 +185,26 @@ def reconstruct_state(rec: Recording, settings: CaptureSettings = CaptureSetting
     return StateRecon(frames, names, masks, c2w, report)
 
 
-def place_state(recon: StateRecon, intr: Intrinsics, twin: Twin, values: dict[str, float],
-                settings: CaptureSettings = CaptureSettings(), registration: Registration | None = None,
-                part_masks: bool = True) -> StateResult:
-    """Steps 3-5: pedestal plane, twin registration (or the given ``registration``), object-frame poses and
-    part masks (skipped, keyed masks returned, when ``part_masks`` is False)."""
+@dataclass
+class Pedestal:
+    """Step 3 of one state: the pedestal ``plane`` (4,) n·x + d = 0 in the capture frame (n up) with its
+    RANSAC ``inliers``, ``up_T`` (4, 4) turning n onto +z, the keyed ``masks`` without pedestal pixels
+    (frame name -> (H, W) bool) and the ``object_points`` (N, 3) those masks keep, capture frame, metres."""
+
+    plane: np.ndarray
+    inliers: int
+    up_T: np.ndarray
+    masks: dict[str, np.ndarray]
+    object_points: np.ndarray
+
+
+def pedestal_step(recon: StateRecon, intr: Intrinsics) -> Pedestal:
+    """Step 3: pedestal plane (RANSAC on the background depth under the object), pedestal pixels dropped."""
     frames, names, c2w, masks = recon.frames, recon.names, recon.c2w, dict(recon.keyed)
-    report = dict(recon.report)
     obj_pts = np.concatenate([view_points(intr, f.depth, masks[f.name], c2w[names[f.name]], 2) for f in frames])
     bg_pts = np.concatenate([view_points(intr, f.depth, ~masks[f.name], c2w[names[f.name]], 3) for f in frames])
     plane, n_in = pedestal_plane(bg_pts, obj_pts)
     up_T = up_alignment(plane)
-    report["pedestal_plane_inliers"] = n_in
     for f in frames:
         w2c = np.linalg.inv(c2w[names[f.name]])
         n_cam = w2c[:3, :3] @ plane[:3]
@@ -202,17 +212,42 @@ def place_state(recon: StateRecon, intr: Intrinsics, twin: Twin, values: dict[st
         plane_cam = np.concatenate([n_cam, [-(n_cam @ (w2c[:3, :3] @ p0 + w2c[:3, 3]))]])
         masks[f.name] = chroma.remove_plane(masks[f.name], f.depth, intr, plane_cam)
     obj_pts = np.concatenate([view_points(intr, f.depth, masks[f.name], c2w[names[f.name]], 2) for f in frames])
-    # 4. twin registration
-    reg = registration if registration is not None else register_twin(twin.whole_mesh(values), obj_pts, up_T=up_T,
-                                                                       seed=settings.seed)
-    if registration is not None:
-        reg = residual_of(twin.whole_mesh(values), obj_pts, registration.T, coarse_fitness=registration.coarse_fitness)
-    report["registration"] = {k: v for k, v in reg.to_dict().items() if k != "T_world_to_capture"}
-    Tinv = np.linalg.inv(reg.T)
-    posed = {f.name: Tinv @ c2w[names[f.name]] for f in frames}
-    # 5. part masks
-    out_masks = part_masks_from_twin(twin, values, intr, posed, masks) if part_masks else masks
-    return StateResult(frames, posed, out_masks, reg, report)
+    return Pedestal(plane, n_in, up_T, masks, obj_pts)
+
+
+def registration_step(pedestal: Pedestal, twin: Twin, values: dict[str, float],
+                      settings: CaptureSettings = CaptureSettings(), shared: Registration | None = None
+                      ) -> Registration:
+    """Step 4: the twin posed at ``values`` registered to the state's object depth; with ``shared`` (one
+    registration for all states of a joint capture) only its residuals on this state are measured."""
+    mesh = twin.whole_mesh(values)
+    if shared is not None:
+        return residual_of(mesh, pedestal.object_points, shared.T, coarse_fitness=shared.coarse_fitness)
+    return register_twin(mesh, pedestal.object_points, up_T=pedestal.up_T, seed=settings.seed)
+
+
+def object_frame_step(recon: StateRecon, registration: Registration) -> dict[str, np.ndarray]:
+    """Step 4 (end): frame name -> (4, 4) camera-to-world in the object (twin base) frame."""
+    Tinv = np.linalg.inv(registration.T)
+    return {f.name: Tinv @ recon.c2w[recon.names[f.name]] for f in recon.frames}
+
+
+def finish_state(recon: StateRecon, intr: Intrinsics, twin: Twin, values: dict[str, float], pedestal: Pedestal,
+                 registration: Registration) -> StateResult:
+    """Steps 4 (end) and 5 from the results of 3 and 4: object-frame poses and part masks from the twin."""
+    report = dict(recon.report)
+    report["pedestal_plane_inliers"] = pedestal.inliers
+    report["registration"] = {k: v for k, v in registration.to_dict().items() if k != "T_world_to_capture"}
+    posed = object_frame_step(recon, registration)
+    masks = part_masks_from_twin(twin, values, intr, posed, pedestal.masks)
+    return StateResult(recon.frames, posed, masks, registration, report)
+
+
+def place_state(recon: StateRecon, intr: Intrinsics, twin: Twin, values: dict[str, float],
+                settings: CaptureSettings = CaptureSettings()) -> StateResult:
+    """Steps 3-5, each once: pedestal masks -> twin registration -> object frame -> part masks from the twin."""
+    pedestal = pedestal_step(recon, intr)
+    return finish_state(recon, intr, twin, values, pedestal, registration_step(pedestal, twin, values, settings))
 
 
 def process_state(rec: Recording, twin: Twin, values: dict[str, float],
