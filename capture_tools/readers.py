@@ -223,6 +223,18 @@ def _read_depth_units(path: Path, shape_hint: tuple[int, int] | None = None) -> 
 
 
 # ----------------------------------------------------------------------------- frame folders
+def _raw_frame(cal: StreamCalibration, depth_files: list[Path], i: int, name: str, t: float, bgr: np.ndarray,
+               says: str) -> RawFrame:
+    """Frame ``i`` from its (H, W, 3) BGR colour image and depth file ``depth_files[i]`` (if any), aligned
+    to colour; :class:`StreamMismatchError` (``says`` + the sizes) when the image is not the calibrated size."""
+    c = cal.colour
+    if bgr.shape[:2] != (c.height, c.width):
+        raise StreamMismatchError(f"{says} {bgr.shape[1]}x{bgr.shape[0]} but the colour intrinsics say "
+                                  f"{c.width}x{c.height}")
+    depth = cal.depth_in_colour(_read_depth_units(depth_files[i])) if depth_files else None
+    return RawFrame(i, name, t, cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), depth)
+
+
 class FrameFolderRecording(Recording):
     """``folder/color/*.png|jpg`` + ``folder/depth/*.png`` + ``folder/intrinsics.json`` (module docstring)."""
 
@@ -247,16 +259,9 @@ class FrameFolderRecording(Recording):
         return len(self.colour_files)
 
     def __iter__(self) -> Iterator[RawFrame]:
-        c = self.calibration.colour
         for i, cp in enumerate(self.colour_files):
             bgr = _read_image(cp, cv2.IMREAD_COLOR)
-            if bgr.shape[:2] != (c.height, c.width):
-                raise StreamMismatchError(f"{cp}: image is {bgr.shape[1]}x{bgr.shape[0]} but the colour "
-                                          f"intrinsics say {c.width}x{c.height}")
-            depth = None
-            if self.depth_files:
-                depth = self.calibration.depth_in_colour(_read_depth_units(self.depth_files[i]))
-            yield RawFrame(i, cp.stem, self.times[i], cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), depth)
+            yield _raw_frame(self.calibration, self.depth_files, i, cp.stem, self.times[i], bgr, f"{cp}: image is")
 
 
 # ----------------------------------------------------------------------------- video + depth folder
@@ -289,7 +294,6 @@ class VideoRecording(Recording):
         return self.n_frames
 
     def __iter__(self) -> Iterator[RawFrame]:
-        c = self.calibration.colour
         cap = cv2.VideoCapture(str(self.source))
         try:
             for i in range(self.n_frames):
@@ -297,13 +301,8 @@ class VideoRecording(Recording):
                 if not ok:
                     raise TruncatedFileError(f"{self.source}: video ends after {i} of {self.n_frames} frames "
                                              f"(truncated file?)")
-                if bgr.shape[:2] != (c.height, c.width):
-                    raise StreamMismatchError(f"{self.source}: frames are {bgr.shape[1]}x{bgr.shape[0]} but the "
-                                              f"colour intrinsics say {c.width}x{c.height}")
-                depth = None
-                if self.depth_files:
-                    depth = self.calibration.depth_in_colour(_read_depth_units(self.depth_files[i]))
-                yield RawFrame(i, f"{i:06d}", i / self.fps, cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), depth)
+                yield _raw_frame(self.calibration, self.depth_files, i, f"{i:06d}", i / self.fps, bgr,
+                                 f"{self.source}: frames are")
         finally:
             cap.release()
 

@@ -37,6 +37,16 @@ def make_safe_id(text: str, default: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.\-]", "_", text).lstrip("_.-")[:128] or default
 
 
+def unique_name(base: str, taken: set[str]) -> str:
+    """``base``, or ``base_1``, ``base_2``, ... : the first not in ``taken``, which is then added to it."""
+    out, k = base, 1
+    while out in taken:
+        out = f"{base}_{k}"
+        k += 1
+    taken.add(out)
+    return out
+
+
 def brief(v: Any) -> str:
     """``v`` as a message quotes it: JSON spelling, strings in quotes, cut to 60 characters."""
     if isinstance(v, str):
@@ -108,6 +118,17 @@ def string(pb: Problems, path: str, v: Any, safe: bool = False) -> bool:
     if safe and not SAFE_ID.match(v):
         pb.add(path, f"{v!r} is not a safe id ({SAFE_ID_RULE})")
         return False
+    return True
+
+
+def unique_id(pb: Problems, path: str, v: Any, seen: set[str], what: str) -> bool:
+    """A safe id (:func:`string` with ``safe``) that ``seen`` does not hold yet (a repeat is a problem
+    ``duplicate <what> ...``); ``seen`` collects it. False only when ``v`` is no safe id."""
+    if not string(pb, path, v, safe=True):
+        return False
+    if v in seen:
+        pb.add(path, f"duplicate {what} {v!r}")
+    seen.add(v)
     return True
 
 

@@ -18,7 +18,7 @@ import numpy as np
 
 from .camera import Camera, Intrinsics
 from .checks import brief as _brief, extra as _extra, is_finite_num as _num, is_int as _is_int
-from .checks import mapping as _dict, relpath as _relpath, string as _str, vector as _vec
+from .checks import mapping as _dict, relpath as _relpath, string as _str, unique_id as _unique_id, vector as _vec
 from .errors import Problems, RsartError, ValidationError
 from .io import check_inside, read_json, write_json
 
@@ -200,10 +200,8 @@ def _parse_parts(pb: Problems, v: Any) -> list[Part] | None:
             continue
         if "index" in p and p["index"] != i:
             pb.add(f"{path}.index", f"must equal its position {i}, got {_brief(p['index'])}")
-        if "name" in p and _str(pb, f"{path}.name", p["name"], safe=True):
-            if p["name"] in names:
-                pb.add(f"{path}.name", f"duplicate part name {p['name']!r}")
-            names.add(p["name"])
+        if "name" in p:
+            _unique_id(pb, f"{path}.name", p["name"], names, "part name")
         if "mesh" in p:
             _relpath(pb, f"{path}.mesh", p["mesh"])
         parts.append(Part(i, p.get("name", ""), p.get("mesh", ""), _extra(p, ("index", "name", "mesh"))))
@@ -224,13 +222,7 @@ def _parse_joints(pb: Problems, v: Any, n_parts: int | None) -> list[Joint] | No
         path = f"joints[{i}]"
         if not _dict(pb, path, j, _JOINT_KEYS):
             continue
-        ok = True
-        if "name" in j and _str(pb, f"{path}.name", j["name"], safe=True):
-            if j["name"] in names:
-                pb.add(f"{path}.name", f"duplicate joint name {j['name']!r}")
-            names.add(j["name"])
-        else:
-            ok = False
+        ok = "name" in j and _unique_id(pb, f"{path}.name", j["name"], names, "joint name")
         if j.get("type") not in JOINT_TYPES:
             pb.add(f"{path}.type", f"{_brief(j.get('type'))} is not one of {list(JOINT_TYPES)}")
             ok = False
@@ -291,10 +283,8 @@ def _parse_states(pb: Problems, v: Any, joints: list[Joint] | None) -> list[Stat
         path = f"states[{i}]"
         if not _dict(pb, path, s, ("id", "kind", "values")):
             continue
-        if "id" in s and _str(pb, f"{path}.id", s["id"], safe=True):
-            if s["id"] in ids:
-                pb.add(f"{path}.id", f"duplicate state id {s['id']!r}")
-            ids.add(s["id"])
+        if "id" in s:
+            _unique_id(pb, f"{path}.id", s["id"], ids, "state id")
         if s.get("kind") not in STATE_KINDS:
             pb.add(f"{path}.kind", f"{_brief(s.get('kind'))} is not one of {list(STATE_KINDS)}")
         vals = s.get("values")
@@ -341,11 +331,15 @@ def meta_to_dict(m: ObjectMeta) -> dict:
     }
 
 
+def _in_folder(path: str | Path, name: str) -> Path:
+    """``path``, or ``path/name`` when ``path`` is a folder."""
+    path = Path(path)
+    return path / name if path.is_dir() else path
+
+
 def read_meta(path: str | Path) -> ObjectMeta:
     """Read and validate ``meta.json`` (a file, or an object folder containing one)."""
-    path = Path(path)
-    if path.is_dir():
-        path = path / "meta.json"
+    path = _in_folder(path, "meta.json")
     return parse_meta(read_json(path), source=str(path))
 
 
@@ -395,10 +389,8 @@ def parse_cameras(d: Any, source: str | None = None) -> CamerasFile:
         path = f"views[{i}]"
         if not _dict(pb, path, v, ("id", "c2w", "split")):
             continue
-        if "id" in v and _str(pb, f"{path}.id", v["id"], safe=True):
-            if v["id"] in ids:
-                pb.add(f"{path}.id", f"duplicate view id {v['id']!r}")
-            ids.add(v["id"])
+        if "id" in v:
+            _unique_id(pb, f"{path}.id", v["id"], ids, "view id")
         c2w = _matrix(pb, f"{path}.c2w", v.get("c2w")) if "c2w" in v else None
         if "split" in v and v["split"] not in SPLITS:
             pb.add(f"{path}.split", f"{_brief(v['split'])} is not one of {list(SPLITS)}")
@@ -480,17 +472,14 @@ def parse_index(d: Any, source: str | None = None) -> DatasetIndex:
 
 
 def read_index(path: str | Path) -> DatasetIndex:
-    path = Path(path)
-    if path.is_dir():
-        path = path / "index.json"
+    """Read and validate ``index.json`` (a file, or a dataset root containing one)."""
+    path = _in_folder(path, "index.json")
     return parse_index(read_json(path), source=str(path))
 
 
 def write_index(index: DatasetIndex, path: str | Path) -> None:
     """Validate and atomically write ``index.json`` (``path`` may be the dataset root)."""
-    path = Path(path)
-    if path.is_dir():
-        path = path / "index.json"
+    path = _in_folder(path, "index.json")
     d = {"format": index.format, "name": index.name, "version": index.version,
          "objects": index.objects, "splits": index.splits, **index.extra}
     parse_index(d, source=str(path))  # never write what we could not read back

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .checks import is_safe_id, make_safe_id
+from .checks import is_safe_id, make_safe_id, unique_name
 from .errors import Problems, RsartError
 from .format import Joint
 from .kinematics import Twin, TwinPart
@@ -135,15 +135,6 @@ def _extra(prim) -> dict:
     except ValueError:
         return {}
     return d if isinstance(d, dict) else {}
-
-
-def _unique(name: str, taken: set[str]) -> str:
-    out, k = name, 1
-    while out in taken:
-        out = f"{name}_{k}"
-        k += 1
-    taken.add(out)
-    return out
 
 
 # ----------------------------------------------------------------------------- joints
@@ -421,7 +412,7 @@ def _read_stage(stage, path: Path) -> Twin:
         members = [b for b in bodies_sorted if group[b] == g]
         mesh, visuals = body_meshes(stage, members, bodies, C, D, world, path.parent.resolve(), pb)
         gprim = stage.GetPrimAtPath(g)
-        name = _unique(_safe_name(custom_attr(gprim, "rsart:name"), gprim.GetName()), taken)
+        name = unique_name(_safe_name(custom_attr(gprim, "rsart:name"), gprim.GetName()), taken)
         if mesh is not None:
             parts.append(TwinPart(len(parts), name, mesh, visuals, _extra(gprim)))
     pb.raise_if_any(str(path))
@@ -439,7 +430,7 @@ def _read_stage(stage, path: Path) -> Twin:
             limits = ((math.radians(limits[0]), math.radians(limits[1])) if j.kind == "revolute"
                       else (limits[0] * mpu, limits[1] * mpu))
         axis, origin, limits = _rsart_exact(j.rsart, axis, origin, limits)
-        out_joints.append(Joint(_unique(j.name, jtaken), j.kind, index[group[j.body0]], index[group[j.body1]],
+        out_joints.append(Joint(unique_name(j.name, jtaken), j.kind, index[group[j.body0]], index[group[j.body1]],
                                 axis, origin, limits, dict(j.rsart.get("extra") or {})))
     layer_data = stage.GetRootLayer().customLayerData
     dp = stage.GetDefaultPrim()

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from .checks import unique_name
 from .errors import RsartError
 from .io import atomic_write_bytes, atomic_write_text, dumps_json
 from .kinematics import Twin, TwinPart
@@ -39,12 +40,7 @@ def prim_name(name: str, taken: set[str]) -> str:
     base = _IDENT.sub("_", name) or "_"
     if base[0].isdigit():
         base = "_" + base
-    out, k = base, 1
-    while out in taken:
-        out = f"{base}_{k}"
-        k += 1
-    taken.add(out)
-    return out
+    return unique_name(base, taken)
 
 
 def quat_from_matrix(R: np.ndarray) -> tuple[float, float, float, float]:
