@@ -18,10 +18,8 @@ from dataclasses import asdict
 from pathlib import Path
 
 import pd2gs  # noqa: F401  (sets OMP_WAIT_POLICY before torch loads)
-
-
-from pd2gs.config_cli import add_option, overrides, value  # noqa: E402
-from rsart.errors import RsartError  # noqa: E402
+from pd2gs.config_cli import add_option, overrides, value
+from rsart.errors import RsartError
 
 
 class UsageError(RsartError):
