@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 import os
+import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
@@ -51,8 +52,25 @@ class ObjectFailure(RsartError):
     """A failed object with its reason (what ``discover`` returns through the pipeline's safe wrapper)."""
 
 
+def canonical_order(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The same mesh with vertices sorted by (x, y, z) and faces sorted, each face's smallest index first
+    (winding kept). open3d's TSDF hash map emits the same triangles in a run-dependent order; written in
+    this order, the same geometry is the same bytes. (V, 3), (F, 3) -> (V, 3), (F, 3)."""
+    v = np.asarray(vertices)
+    f = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    order = np.lexsort((v[:, 2], v[:, 1], v[:, 0])) if len(v) else np.zeros(0, np.int64)
+    rank = np.empty(len(v), np.int64)
+    rank[order] = np.arange(len(v))
+    if len(f):
+        f = rank[f]
+        f = np.take_along_axis(f, (np.arange(3)[None, :] + np.argmin(f, axis=1)[:, None]) % 3, axis=1)
+        f = f[np.lexsort((f[:, 2], f[:, 1], f[:, 0]))]
+    return v[order], f
+
+
 def _ply(mesh: trimesh.Trimesh) -> bytes:
-    geom = trimesh.Trimesh(np.asarray(mesh.vertices), np.asarray(mesh.faces), process=False)
+    v, f = canonical_order(np.asarray(mesh.vertices), np.asarray(mesh.faces))
+    geom = trimesh.Trimesh(v, f, process=False)
     return trimesh.exchange.ply.export_ply(geom, encoding="binary")
 
 
@@ -113,9 +131,31 @@ def write_submission(results: Mapping[str, ObjectResult | BaseException | None],
             log.warning("%s: failed (%s); written as null", oid, reason)
             entries[oid] = None
             failures[oid] = reason
-        doc = {"format": FORMAT, "method": dict(method_block), "dataset": dict(dataset_block or {}),
-               "results": entries}
-        write_json(tmp / "submission.json", doc)
-        if failures:
-            write_json(tmp / "failures.json", failures)
+        _write_doc(tmp, entries, failures, method_block, dataset_block)
+    return out / "submission.json"
+
+
+def _write_doc(tmp: Path, entries: dict, failures: dict, method_block: dict, dataset_block: dict | None) -> None:
+    doc = {"format": FORMAT, "method": dict(method_block), "dataset": dict(dataset_block or {}), "results": entries}
+    write_json(tmp / "submission.json", doc)
+    if failures:
+        write_json(tmp / "failures.json", failures)
+
+
+def write_submission_entries(entries: Mapping[str, dict | None], failures: Mapping[str, str],
+                             mesh_dirs: Mapping[str, Path], out_dir: str | os.PathLike, method_block: dict,
+                             dataset_block: dict | None = None) -> Path:
+    """Write a submission from entries already written by :func:`object_entry` (``pd2gs.runner``'s per-object
+    results): entry paths are relative to ``mesh_dirs[object_id]``, whose ``<object_id>/`` folder is copied.
+    ``None`` entries are failures (reason in ``failures``). Replaces ``out_dir`` atomically; -> submission.json.
+    """
+    if not isinstance(method_block, dict) or not method_block.get("name"):
+        raise ValueError("method_block needs a non-empty 'name'")
+    out = Path(out_dir)
+    with atomic_dir(out, overwrite=True) as tmp:
+        for oid, entry in entries.items():
+            if entry is not None and (Path(mesh_dirs[oid]) / oid).is_dir():
+                shutil.copytree(Path(mesh_dirs[oid]) / oid, tmp / oid)
+        _write_doc(tmp, dict(entries), {k: failures[k] for k in entries if k in failures}, method_block,
+                   dataset_block)
     return out / "submission.json"
