@@ -75,7 +75,20 @@ def _parser() -> argparse.ArgumentParser:
     for name in ("refine", "articulate"):
         add_option(u, DiscoveryConfig, name, negate=True)
     u.add_argument("--quiet", action="store_true", help="no progress bars")
+    _add_runner_options(u)
     return ap
+
+
+def _add_runner_options(p: argparse.ArgumentParser) -> None:
+    """Where ``pd2gs run``'s per-object tasks run (pd2gs/runner.py; docs/pd2gs.md "Running on a cluster")."""
+    g = p.add_argument_group("execution (a rerun with the same --out resumes: finished objects are skipped)")
+    g.add_argument("--backend", default="process", choices=["process", "ray"],
+                   help="local worker processes, or Ray tasks (pip install 'rsart[ray]')")
+    g.add_argument("--workers", type=int, default=None,
+                   help="objects run at once (default 1; with --address: cluster CPUs / --threads)")
+    g.add_argument("--address", default=None, help="Ray cluster address (default: start a local Ray)")
+    g.add_argument("--threads", type=int, default=None,
+                   help="CPU threads per object task (default: cores / workers; 1 on a Ray cluster)")
 
 
 def _eval(args) -> int:
@@ -201,9 +214,15 @@ def _run(args) -> int:
     tcfg = TrainConfig(**over)
     dcfg = DiscoveryConfig(**overrides(args, DiscoveryConfig))
     objects = [o for o in args.objects.split(",") if o] if args.objects else None
+    for name in ("workers", "threads"):
+        if getattr(args, name) is not None and getattr(args, name) < 1:
+            raise UsageError(f"--{name} must be at least 1, got {getattr(args, name)}")
+    if args.address and args.backend != "ray":
+        raise UsageError("--address needs --backend ray")
     try:
         sub = run(args.data, args.out, objects=objects, split=args.split, train_cfg=tcfg, discovery_cfg=dcfg,
-                  progress=not args.quiet)
+                  progress=not args.quiet, backend=args.backend, workers=args.workers, address=args.address,
+                  threads=args.threads)
     except KeyError as e:
         raise UsageError(str(e)) from None
     print(f"wrote {sub}; score it with: rsart-eval {sub} --data {args.data}")
@@ -223,7 +242,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"pd2gs: error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print("pd2gs: interrupted (the last checkpoint is kept; resume with --resume)", file=sys.stderr)
+        print("pd2gs: interrupted (finished work is kept; resume: train --resume, run: the same command)",
+              file=sys.stderr)
         return 130
 
 

@@ -5,7 +5,6 @@ that fails anywhere becomes ``null`` in the submission with its reason logged, n
 """
 from __future__ import annotations
 
-import dataclasses
 import logging
 import time
 from dataclasses import asdict
@@ -69,45 +68,54 @@ def train_object(obj_dir: Path, run_dir: Path, cfg, progress: bool = True) -> Tr
     return TrainedModel(trainer.field, cfg.states, cfg.background)
 
 
-def run(data: str | Path, out: str | Path, objects: list[str] | None = None, split: str | None = None,
-        train_cfg=None, discovery_cfg=None, progress: bool = True) -> Path:
-    """Run PD²GS on every object (of ``split`` / ``objects``) under ``data``; write ``out/submission/``.
-
-    Training runs go to ``out/runs/<object_id>/`` (a re-run reuses finished runs); the submission (meshes +
-    ``submission.json``, scored by ``rsart-eval``) to ``out/submission/``. Returns the submission.json path.
-    """
+def select_objects(data: str | Path, objects: list[str] | None = None, split: str | None = None) -> list:
+    """The RSArtObjects to run: ``data`` is one object folder, or a dataset (all objects, a split, or ids)."""
     import rsart
 
+    d = rsart.load(Path(data))
+    if isinstance(d, rsart.RSArtObject):
+        return [d]
+    if split is not None and split not in d.splits:
+        raise RsartError(f"{data}: unknown split {split!r} (index.json has {sorted(d.splits)})")
+    ids = objects or (d.splits[split] if split else list(d))
+    unknown = [i for i in ids if i not in d]
+    if unknown:
+        raise RsartError(f"{data}: unknown objects {unknown}")
+    return [d[i] for i in ids]
+
+
+def run(data: str | Path, out: str | Path, objects: list[str] | None = None, split: str | None = None,
+        train_cfg=None, discovery_cfg=None, progress: bool = True, backend: str = "process",
+        workers: int | None = None, address: str | None = None, threads: int | None = None) -> Path:
+    """Run PD²GS on every object (of ``split`` / ``objects``) under ``data``; write ``out/submission/``.
+
+    One task per object (:mod:`pd2gs.runner`: ``backend`` "process" with ``workers`` local processes, or
+    "ray" on the cluster at ``address`` / a local Ray), ``threads`` CPU threads each (default: this
+    machine's cores / workers; 1 on a Ray cluster). Training runs and per-object results go to
+    ``out/runs/<object_id>/`` (a re-run skips finished objects and reuses finished stages); the
+    submission (meshes + ``submission.json``, scored by ``rsart-eval``) to ``out/submission/``, and the
+    done / failed / skipped summary to ``out/summary.json``. Returns the submission.json path.
+    """
     from .discovery.config import DiscoveryConfig
-    from .discovery.pipeline import dataset_block, discover_safe, method_block
-    from .discovery.submission import ObjectFailure, write_submission
+    from .discovery.pipeline import dataset_block, method_block
+    from .runner import ObjectTask, assemble, default_threads, execute, import_ray, summarize
     from .train import TrainConfig
 
+    if backend == "ray":
+        import_ray()  # before anything else: without ray, say how to install it
     data, out = Path(data), Path(out)
-    d = rsart.load(data)
-    if isinstance(d, rsart.RSArtObject):
-        objs = [d]
-    else:
-        ids = objects or (d.splits[split] if split else list(d))
-        unknown = [i for i in ids if i not in d]
-        if unknown:
-            raise RsartError(f"{data}: unknown objects {unknown}")
-        objs = [d[i] for i in ids]
+    objs = select_objects(data, objects, split)
     dcfg = discovery_cfg or DiscoveryConfig()
-    results = {}
-    for obj in objs:
-        t0 = time.perf_counter()
-        cfg = TrainConfig.from_json(asdict(train_cfg)) if train_cfg is not None else TrainConfig()
-        try:
-            model = train_object(obj.path, out / "runs" / obj.id, cfg, progress=progress)
-            ocfg = dcfg if dcfg.background is not None else dataclasses.replace(dcfg, background=model.background)
-            results[obj.id] = discover_safe(model, obj, ocfg)
-        except Exception as e:  # a failed object is a null entry, never a crash
-            log.error("%s: %s: %s", obj.id, type(e).__name__, e)
-            results[obj.id] = e if isinstance(e, ObjectFailure) else ObjectFailure(f"{type(e).__name__}: {e}")
-        status = "failed: " + str(results[obj.id]) if isinstance(results[obj.id], BaseException) else "ok"
-        print(f"[pd2gs] {obj.id}: {status} ({time.perf_counter() - t0:.0f} s)", flush=True)
-    n_states = dcfg.n_states or len(train_cfg.states if train_cfg is not None and train_cfg.states else
-                                    [s for s in objs[0].meta.states if s.kind == "multi"])
-    return write_submission(results, out / "submission", method_block(dcfg, n_states), dataset_block(str(data)),
-                            overwrite=True)
+    tcfg = train_cfg or TrainConfig()
+    if threads is None:
+        threads = 1 if (backend == "ray" and address) else default_threads(workers or 1)
+    if threads < 1:
+        raise RsartError(f"threads must be at least 1, got {threads}")
+    tasks = [ObjectTask(str(data), o.id, str(out / "runs" / o.id), tcfg, {"default": dcfg},
+                        threads) for o in objs]
+    outcomes = execute(tasks, backend, workers, address, progress)
+    n_states = dcfg.n_states or len(tcfg.states or [s for s in objs[0].meta.states if s.kind == "multi"])
+    sub = assemble(tasks, "default", outcomes, out / "submission", method_block(dcfg, n_states),
+                   dataset_block(str(data)))
+    summarize(outcomes, out / "summary.json")
+    return sub
