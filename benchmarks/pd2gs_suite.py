@@ -5,15 +5,16 @@ plain background), train PD²GS (default ``TrainConfig``), discover parts/joints
 ``DiscoveryConfig``), and -- on the same trained fields, so they cost no extra training -- the
 discovery ablations (no refinement, oracle masks, given part count, without our photometric
 articulation fit, the paper's kinematics (centre-based joints and its type rule), 2 states instead
-of 4, no chained joints, rigid-motion clustering), in ``--jobs`` worker processes. Every configuration
-becomes one rsart-submission/1 that ``rsart-eval`` scores; the report has the paper-style table per category for the default, the wall time per
+of 4, no chained joints, rigid-motion clustering). Each object is one task of pd2gs's runner
+(``pd2gs/runner.py``, the one ``pd2gs run`` uses): ``--workers`` at once, in local processes or on Ray
+(``--backend ray [--address ADDR]``). Every configuration becomes one rsart-submission/1 that ``rsart-eval`` scores; the report has the paper-style table per category for the default, the wall time per
 object, and one row of category means per ablation.
 
     python benchmarks/pd2gs_suite.py --split two-part [--limit 6] [--work /tmp/pd2gs-suite]
     python benchmarks/pd2gs_suite.py --objects storage-0001,drawer-0000
 
 Writes ``benchmarks/results/pd2gs-rsart-synth.md`` and ``.json`` (override with ``--out``). Re-running
-with the same ``--work`` reuses rendered data and finished training runs; ``--train-only`` stops after
+with the same ``--work`` reuses rendered data, finished training runs and finished discoveries; ``--train-only`` stops after
 training (e.g. to train a large split while discovery code is still changing).
 """
 from __future__ import annotations
@@ -21,7 +22,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import multiprocessing
 import os
 import platform
 import sys
@@ -91,68 +91,39 @@ def prepare_data(work: Path, ids: list[str] | None, split: str | None, limit: in
     return data, ids
 
 
-def _discover_one(args: tuple[str, str, str, str]) -> tuple[str, str, object, float]:
-    """Worker: one discovery configuration on one trained object (the field is loaded from its run folder)."""
-    data, oid, run_dir, name = args
-    import torch
-
-    import rsart
-    from pd2gs.discovery.config import DiscoveryConfig
-    from pd2gs.discovery.pipeline import discover_safe
-    from pd2gs.run import TrainedModel
-    from pd2gs.train import load_field
-
-    torch.set_num_threads(1)
-    tcfg, field = load_field(run_dir)
-    model = TrainedModel(field, tcfg.states, tcfg.background)
-    dcfg = dataclasses.replace(DiscoveryConfig(background=model.background), **ABLATIONS[name])
-    t1 = time.time()
-    res = discover_safe(model, rsart.load(data)[oid], dcfg)  # a failure becomes null, never a crash
-    if not isinstance(res, Exception):
-        res.field = None  # not needed for the submission; keeps the pickle back to the parent small
-    return oid, name, res, time.time() - t1
-
-
-def run_all(data: Path, ids: list[str], work: Path, iters: int | None, ablations: list[str], jobs: int = 1) -> dict:
-    """Train each object once, then run every discovery configuration on the trained fields (``jobs``
-    worker processes, one thread each), and write one submission per configuration."""
-    from concurrent.futures import ProcessPoolExecutor
-
+def run_all(data: Path, ids: list[str], work: Path, iters: int | None, ablations: list[str], workers: int = 1,
+            backend: str = "process", address: str | None = None, threads: int | None = None) -> dict:
+    """Train each object once and run every discovery configuration on its trained field, one runner task
+    per object (pd2gs/runner.py: ``workers`` local processes or Ray tasks, ``threads`` each; a rerun with the
+    same ``work`` skips finished objects and reuses finished stages); write one submission per
+    configuration. ``ablations`` empty: train only."""
     import rsart
     from pd2gs.discovery.config import DiscoveryConfig
     from pd2gs.discovery.pipeline import dataset_block, method_block
-    from pd2gs.discovery.submission import write_submission
-    from pd2gs.run import train_object
+    from pd2gs.runner import ObjectTask, assemble, default_threads, execute, summarize
     from pd2gs.train import TrainConfig
 
     ds = rsart.load(data)
-    results: dict[str, dict] = {a: {} for a in ablations}
+    cfg = TrainConfig() if iters is None else TrainConfig(iters=iters)
+    if threads is None:
+        threads = 1 if (backend == "ray" and address) else default_threads(workers)
+    variants = {name: dataclasses.replace(DiscoveryConfig(), **ABLATIONS[name]) for name in ablations}
+    tasks = [ObjectTask(str(data), oid, str(work / "runs" / oid), cfg, variants, threads) for oid in ids]
+    outcomes = execute(tasks, backend, workers, address, progress=True)
+    summarize(outcomes, work / "summary.json", say=_say)
     timing: dict[str, dict] = {}
     for oid in ids:
-        obj = ds[oid]
-        cfg = TrainConfig() if iters is None else TrainConfig(iters=iters)
-        train_object(obj.path, work / "runs" / oid, cfg, progress=False)
-        # the run's own training time (also right when a finished run is reused)
-        metrics = json.loads((work / "runs" / oid / "metrics.json").read_text())
-        timing[oid] = {"train_s": float(metrics["seconds"]), "category": obj.meta.category,
-                       "test_psnr": metrics.get("test_psnr", {})}
-        _say(f"{oid}: trained in {timing[oid]['train_s']:.0f} s")
+        metrics_path = work / "runs" / oid / "metrics.json"
+        metrics = json.loads(metrics_path.read_text()) if metrics_path.is_file() else {}
+        timing[oid] = {"category": ds[oid].meta.category, "test_psnr": metrics.get("test_psnr", {}),
+                       **outcomes[oid].timings}
+        timing[oid].setdefault("train_s", float("nan"))
+        timing[oid]["total_s"] = timing[oid]["train_s"] + timing[oid].get("discover_s[default]", float("nan"))
     if not ablations:  # --train-only
         return {"timing": timing}
-    tasks = [(str(data), oid, str(work / "runs" / oid), name) for oid in ids for name in ablations]
-    # spawn, not fork: the parent ran torch's OpenMP while training, and forking it aborts the workers
-    with ProcessPoolExecutor(max_workers=max(1, jobs), mp_context=multiprocessing.get_context("spawn")) as pool:
-        for oid, name, res, secs in pool.map(_discover_one, tasks):
-            results[name][oid] = res
-            timing[oid][f"discover_s[{name}]"] = secs
-            _say(f"{oid} [{name}]: discovery {secs:.0f} s")
-    for oid in ids:
-        timing[oid]["total_s"] = timing[oid]["train_s"] + timing[oid]["discover_s[default]"]
-    subs = {}
-    for name in ablations:
-        dcfg = dataclasses.replace(DiscoveryConfig(), **ABLATIONS[name])
-        subs[name] = write_submission(results[name], work / "submissions" / name, method_block(dcfg),
-                                      dataset_block(str(data)), overwrite=True)
+    subs = {name: assemble(tasks, name, outcomes, work / "submissions" / name, method_block(variants[name]),
+                           dataset_block(str(data)))
+            for name in ablations}
     return {"submissions": subs, "timing": timing}
 
 
@@ -202,7 +173,7 @@ def report(scores: dict[str, dict], timing: dict, work: Path, ids: list[str], wa
               "## Wall time per object", "", "| object | category | train (s) | discovery (s) | total (min) |",
               "|---|---|---:|---:|---:|"]
     for oid, t in timing.items():
-        lines.append(f"| {oid} | {t['category']} | {t['train_s']:.0f} | {t['discover_s[default]']:.0f} | "
+        lines.append(f"| {oid} | {t['category']} | {t['train_s']:.0f} | {t.get('discover_s[default]', float('nan')):.0f} | "
                      f"{t['total_s'] / 60:.1f} |")
     lines += ["", "## Test-view PSNR of the trained fields (dB; target ≥ 28 on 2-part objects)", "",
               "| object | " + " | ".join(["m0", "m1", "m2", "m3", "mean"]) + " |", "|---|" + "---:|" * 5]
@@ -241,8 +212,11 @@ def main() -> int:
     ap.add_argument("--limit", type=int, help="at most this many objects of the split, spread over categories")
     ap.add_argument("--iters", type=int, help="training iterations (default: TrainConfig's)")
     ap.add_argument("--ablations", default=",".join(ABLATIONS), help="comma list of " + ", ".join(ABLATIONS))
-    ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
-                    help="discovery worker processes after training (default: one per core)")
+    ap.add_argument("--workers", "--jobs", type=int, default=1, help="objects run at once (runner tasks)")
+    ap.add_argument("--backend", default="process", choices=["process", "ray"],
+                    help="local worker processes or Ray tasks (docs/pd2gs.md \"Running on a cluster\")")
+    ap.add_argument("--address", default=None, help="Ray cluster address (default: a local Ray)")
+    ap.add_argument("--threads", type=int, default=None, help="CPU threads per task (default: cores / workers)")
     ap.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results" / "pd2gs-rsart-synth.md")
     ap.add_argument("--train-only", action="store_true",
                     help="render and train the selected objects into --work, then stop (a later run reuses them)")
@@ -257,10 +231,10 @@ def main() -> int:
     args.work.mkdir(parents=True, exist_ok=True)
     data, ids = prepare_data(args.work, args.objects.split(",") if args.objects else None, args.split, args.limit)
     if args.train_only:
-        run_all(data, ids, args.work, args.iters, [], args.jobs)
+        run_all(data, ids, args.work, args.iters, [], args.workers, args.backend, args.address, args.threads)
         _say(f"trained {len(ids)} objects in {(time.time() - t0) / 60:.0f} min")
         return 0
-    res = run_all(data, ids, args.work, args.iters, abl, args.jobs)
+    res = run_all(data, ids, args.work, args.iters, abl, args.workers, args.backend, args.address, args.threads)
     scores = score(data, res["submissions"], args.work)
     md = report(scores, res["timing"], args.work, ids, time.time() - t0)
     from rsart.io import atomic_write_text, write_json
