@@ -108,7 +108,8 @@ def run_all(data: Path, ids: list[str], work: Path, iters: int | None, ablations
     if threads is None:
         threads = 1 if (backend == "ray" and address) else default_threads(workers)
     variants = {name: dataclasses.replace(DiscoveryConfig(), **ABLATIONS[name]) for name in ablations}
-    tasks = [ObjectTask(str(data), oid, str(work / "runs" / oid), cfg, variants, threads) for oid in ids]
+    tasks = [ObjectTask(str(data.resolve()), oid, str(work.resolve() / "runs" / oid), cfg, variants, threads)
+             for oid in ids]
     outcomes = execute(tasks, backend, workers, address, progress=True)
     summarize(outcomes, work / "summary.json", say=_say)
     timing: dict[str, dict] = {}

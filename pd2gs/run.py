@@ -111,7 +111,8 @@ def run(data: str | Path, out: str | Path, objects: list[str] | None = None, spl
         threads = 1 if (backend == "ray" and address) else default_threads(workers or 1)
     if threads < 1:
         raise RsartError(f"threads must be at least 1, got {threads}")
-    tasks = [ObjectTask(str(data), o.id, str(out / "runs" / o.id), tcfg, {"default": dcfg},
+    # absolute paths: a worker (a Ray node) need not share this process's working directory
+    tasks = [ObjectTask(str(data.resolve()), o.id, str(out.resolve() / "runs" / o.id), tcfg, {"default": dcfg},
                         threads) for o in objs]
     outcomes = execute(tasks, backend, workers, address, progress)
     n_states = dcfg.n_states or len(tcfg.states or [s for s in objs[0].meta.states if s.kind == "multi"])
