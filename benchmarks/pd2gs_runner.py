@@ -7,6 +7,7 @@ folder, nothing reused), and writes the wall times, the speed-up over 1 worker a
 (cores / workers) unless ``--threads`` fixes them. Run it on an otherwise idle machine:
 
     python benchmarks/pd2gs_runner.py [--backend process|ray] [--workers 1,2] [--objects 4] [--iters 300]
+                                      [--discovery default|fast]
 """
 from __future__ import annotations
 
@@ -60,6 +61,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--iters", type=int, default=300, help="training iterations per object")
     ap.add_argument("--size", default="128x96", help="rendered image size")
     ap.add_argument("--views", type=int, default=12, help="training views per state")
+    ap.add_argument("--discovery", default="default", choices=["default", "fast"],
+                    help="fast: without boundary refinement and the photometric articulation fit")
     ap.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results" / "pd2gs-runner.md")
     args = ap.parse_args(argv)
     from pd2gs.data import parse_size
@@ -75,12 +78,13 @@ def main(argv: list[str] | None = None) -> int:
     data = prepare(args.work, args.objects, args.size, args.views)
     w, h = parse_size(args.size)
     tcfg = TrainConfig(iters=args.iters, size=(w // 2, h // 2))
+    dcfg = DiscoveryConfig() if args.discovery == "default" else DiscoveryConfig(refine=False, articulate=False)
     rows = []
     for n in counts:
         out = args.work / f"run-{args.backend}-w{n}"
         shutil.rmtree(out, ignore_errors=True)  # from scratch: nothing reused
         t0 = time.perf_counter()
-        run(data, out, train_cfg=tcfg, discovery_cfg=DiscoveryConfig(), progress=False, backend=args.backend,
+        run(data, out, train_cfg=tcfg, discovery_cfg=dcfg, progress=False, backend=args.backend,
             workers=n, threads=args.threads)
         wall = time.perf_counter() - t0
         summary = json.loads((out / "summary.json").read_text())
@@ -92,7 +96,7 @@ def main(argv: list[str] | None = None) -> int:
              f"Measured {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())} on {os.cpu_count()} CPU cores "
              f"({platform.processor() or platform.machine()}); {args.objects} tiny objects "
              f"({args.size} renders, {args.views} train views per state, {args.iters} training iterations at "
-             f"{w // 2}x{h // 2}, default discovery); threads per task: "
+             f"{w // 2}x{h // 2}, {args.discovery} discovery); threads per task: "
              f"{args.threads or 'cores / workers'}.", "",
              f"Command: `python benchmarks/pd2gs_runner.py {' '.join(argv if argv is not None else sys.argv[1:])}`",
              "", "| workers | wall (s) | speed-up | objects done | load average after (1/5/15 min) |",

@@ -223,11 +223,13 @@ def test_mesh_bytes_do_not_depend_on_vertex_and_face_order():
 def test_runner_benchmark_script_runs(tmp_path):
     out = tmp_path / "bench.md"
     r = subprocess.run([sys.executable, str(REPO / "benchmarks" / "pd2gs_runner.py"), "--work", str(tmp_path / "w"),
-                        "--objects", "2", "--iters", "10", "--size", "64x48", "--views", "4", "--workers", "1,2",
-                        "--out", str(out)], capture_output=True, text=True, env=_env(), timeout=900)
+                        "--objects", "2", "--iters", "40", "--size", "128x96", "--views", "6", "--workers", "1,2",
+                        "--discovery", "fast", "--threads", "1", "--out", str(out)],
+                       capture_output=True, text=True, env=_env(), timeout=900)
     assert r.returncode == 0, r.stderr[-3000:]
     rows = json.loads(out.with_suffix(".json").read_text())["rows"]
-    assert [row["workers"] for row in rows] == [1, 2] and all(row["done"] == 2 for row in rows)
+    assert [row["workers"] for row in rows] == [1, 2]
+    assert all(row["done"] == 2 for row in rows), (rows, r.stdout[-2000:])
     assert all(row["wall_s"] > 0 for row in rows)
     text = out.read_text()
     assert "| 1 |" in text and "| 2 |" in text and "speed-up" in text
