@@ -42,7 +42,6 @@ from rsart.io import atomic_dir, dumps_json, read_json, write_json
 log = logging.getLogger(__name__)
 
 BACKENDS = ("process", "ray")
-RAY_INSTALL = "--backend ray needs the optional 'ray' package: pip install 'rsart[ray]'"
 MAX_ATTEMPTS = 3  # a task whose worker dies this often is reported failed
 
 
@@ -341,11 +340,13 @@ def _process_pool(tasks: list[ObjectTask], workers: int) -> Iterator[tuple[Objec
 
 
 def import_ray():
-    """The ``ray`` module, or an RsartError saying how to install it."""
+    """The ``ray`` module, or a one-line :class:`~rsart.extras.MissingExtra` saying how to install it."""
+    from rsart.extras import MissingExtra
+
     try:
         import ray
     except ImportError:
-        raise RsartError(RAY_INSTALL) from None
+        raise MissingExtra("ray", "ray", "--backend ray") from None
     return ray
 
 
