@@ -310,27 +310,32 @@ def _process_pool(tasks: list[ObjectTask], workers: int) -> Iterator[tuple[Objec
         pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
                                    initializer=_ignore_sigint)
         try:
-            running = {}
-            for t in queue:
-                attempts[t.object_id] += 1
-                running[pool.submit(run_object, t)] = t
-            queue = []
-            while running:
+            running: dict[Any, ObjectTask] = {}
+            retry: list[ObjectTask] = []
+            broken = False
+            while running or (queue and not broken):
+                while queue and not broken and len(running) < workers:  # only running tasks pay an attempt
+                    t = queue.pop(0)
+                    attempts[t.object_id] += 1
+                    running[pool.submit(run_object, t)] = t
                 done, _ = wait(running, timeout=1.0, return_when=FIRST_COMPLETED)
+                if not done:
+                    yield None  # a tick: the caller refreshes the progress bar
                 for f in done:
                     t = running.pop(f)
                     try:
-                        yield t, f.result()
-                    except BrokenProcessPool:
-                        if attempts[t.object_id] >= MAX_ATTEMPTS:
-                            yield t, RuntimeError(f"its worker process died {attempts[t.object_id]} times")
-                        else:
+                        res: Any = f.result()
+                    except BrokenProcessPool:  # a worker died: every task of this pool ends here
+                        broken = True
+                        if attempts[t.object_id] < MAX_ATTEMPTS:
                             log.warning("%s: worker process died; retrying", t.object_id)
-                            queue.append(t)
+                            retry.append(t)
+                            continue
+                        res = RuntimeError(f"its worker process died {attempts[t.object_id]} times")
                     except Exception as e:  # pragma: no cover - run_object catches object failures
-                        yield t, e
-                if not done:
-                    yield None  # a tick: the caller refreshes the progress bar
+                        res = e
+                    yield t, res
+            queue = retry + queue
         finally:
             procs = list((getattr(pool, "_processes", None) or {}).values())
             pool.shutdown(wait=False, cancel_futures=True)

@@ -154,6 +154,25 @@ def test_killed_ray_worker_is_retried_and_the_submission_is_the_same(data, refer
 
 
 @pytest.mark.slow
+def test_killed_process_worker_is_retried_and_the_submission_is_the_same(data, reference, tmp_path):
+    out = tmp_path / "killed-process"
+    proc = subprocess.Popen(_cmd(data, out, "--backend", "process", "--workers", "2"), stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=_env())
+    try:
+        oid, doc = _wait_for_stage(out, proc, ("train",))
+        os.kill(doc["pid"], signal.SIGKILL)  # one worker process of the pool
+        stdout, stderr = proc.communicate(timeout=900)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0, stderr[-3000:]
+    assert "worker process died; retrying" in stderr
+    assert (out / "runs" / oid / "log.txt").read_text().count("attempt on") == 2
+    assert "done 2, failed 0" in stdout
+    _assert_same_submission(reference, out / "submission")
+
+
+@pytest.mark.slow
 def test_interrupted_run_resumes_to_the_same_submission(data, reference, tmp_path):
     out = tmp_path / "interrupted"
     proc = subprocess.Popen(_cmd(data, out, "--backend", "process", "--workers", "1"), stdout=subprocess.PIPE,
