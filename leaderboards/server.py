@@ -219,8 +219,12 @@ def api_router(st: AppState) -> APIRouter:
     def leaderboard():
         return [{"id": s.id, "method": s.method_name, "version": s.method_version, "team": s.team,
                  "dataset": s.dataset_label, "track": s.track, "n_objects": s.n_objects,
-                 "n_failed_objects": s.n_failed_objects,
-                 "mean": {m: {"value": v, "n": n, "n_failed": nf} for m, (v, n, nf) in s.agg.get(MEAN, {}).items()}}
+                 "n_failed_objects": s.n_failed_objects, "run": s.run, "run_config_hash": s.run_config_hash,
+                 "scorer_version": s.scorer_version, "completion": s.completion,
+                 "mean": {m: {"value": v, "n": n, "n_failed": nf,
+                              "penalised": s.pen.get(MEAN, {}).get(m, (None, None))[0],
+                              "completion": s.pen.get(MEAN, {}).get(m, (None, None))[1]}
+                          for m, (v, n, nf) in s.agg.get(MEAN, {}).items()}}
                 for s in list_submissions(st.engine)]
 
     @r.get("/healthz")

@@ -33,7 +33,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--trans", type=float, default=0.0, help="translation noise sigma per axis, object units (default 0)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--poses", choices=("gt", "colmap"), default="gt", help="start from the true poses or SfM estimates")
-    p.add_argument("--out", type=Path, required=True, help="folder for the copy (must not exist unless --overwrite)")
+    p.add_argument("--out", type=Path, required=True, help="folder for the copy (new or empty; a non-empty one needs --overwrite)")
     p.add_argument("--overwrite", action="store_true")
     p.set_defaults(func=_run)
 

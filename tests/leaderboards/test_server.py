@@ -53,6 +53,9 @@ def test_upload_is_scored_and_appears(server, gt_sub):
     me = [x for x in rows if x["method"] == "uploaded-gt"]
     assert len(me) == 1 and me[0]["team"] == "team-main"
     assert me[0]["mean"]["axis_ang"]["value"] == pytest.approx(0.0, abs=1e-9)
+    # the ground truth completes every object, so its penalised mean is its plain mean
+    assert me[0]["completion"] == 1.0 and me[0]["mean"]["axis_ang"]["penalised"] == pytest.approx(0.0, abs=1e-9)
+    assert me[0]["scorer_version"] not in (None, "0") and me[0]["run"]
     page = httpx.get(server.url + "/").text
     assert "uploaded-gt" in page and "published rows, not re-run here" in page
 
