@@ -31,7 +31,7 @@ aptinstall:
 	  $(SUDO) apt-get update -q && DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -q $$missing; fi
 
 # The full environment, = pip install 'rsart[all]' pinned by requirements.lock (every extra). ray (the [ray]
-# extra) is in it so the Ray runner tests (tests/pd2gs/test_runner.py) run; `make test` sets
+# extra) is in it so the Ray runner tests (tests/pd2gs/test_object_runner.py) run; `make test` sets
 # RSART_REQUIRE_RAY=1, which fails them instead of skipping when ray is missing.
 $(STAMP): pyproject.toml requirements.lock
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
