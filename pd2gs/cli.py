@@ -70,9 +70,11 @@ def _parser() -> argparse.ArgumentParser:
     u.add_argument("--out", required=True, help="output folder")
     add_option(u, TrainConfig, "iters")
     u.add_argument("--size", default=None, help=f"training image size WxH (default {size})")
-    for name in ("counter", "joint_rule", "mask_provider", "n_states"):
+    for name in ("mode", "counter", "n_states", "joint_rule", "mask_provider"):
         add_option(u, DiscoveryConfig, name)
-    for name in ("refine", "articulate"):
+    add_option(u, DiscoveryConfig, "fit_silhouette", flag="--silhouette")
+    add_option(u, DiscoveryConfig, "fit_depth", flag="--depth")
+    for name in ("select", "refine"):
         add_option(u, DiscoveryConfig, name, negate=True)
     u.add_argument("--quiet", action="store_true", help="no progress bars")
     _add_runner_options(u)

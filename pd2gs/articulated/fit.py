@@ -54,6 +54,10 @@ class FitConfig:
     # (0 = off), not in the last ``reassign_every`` steps; ``reassign_margin`` mean RGB error
     reassign_every: int = 100
     reassign_margin: float = 0.02
+    # ... judged on at most ``reassign_views`` train views, counting a view only where the posed centre is
+    # not behind the rendered surface by more than ``reassign_depth_tol`` x the extent (None: no depth test)
+    reassign_views: int | None = 64
+    reassign_depth_tol: float | None = 0.02
     # the first this many steps hold the geometry (means, rotations, scales) still, so the joints and
     # ownership, not a deformed canonical shape, have to explain the motion
     joint_warmup: int = 0
@@ -118,7 +122,7 @@ def fit_articulated(model: ArticulatedGaussians, frames: list[Frame], masks: lis
     if cfg.ref_state is not None and not 0 <= cfg.ref_state < model.num_states:
         raise ValueError(f"ref_state: {cfg.ref_state} is not one of the model's {model.num_states} states")
     model.hard = False
-    opt = torch.optim.Adam(param_groups(model, cfg), eps=1e-15)
+    opt = torch.optim.Adam(param_groups(model, cfg), eps=1e-15, fused=True)  # fused: one kernel per step on CPU too
     rng = np.random.default_rng(cfg.seed)
     bg = torch.tensor(cfg.background)
     res = FitResult()
@@ -141,7 +145,9 @@ def fit_articulated(model: ArticulatedGaussians, frames: list[Frame], masks: lis
         res.losses.append(float(loss.detach()))
         every = cfg.reassign_every
         if every and (step + 1) % every == 0 and step + 1 + every <= cfg.iters:
-            res.reassigned.append(reassign(model, frames, masks, cfg.reassign_margin))
+            res.reassigned.append(reassign(model, frames, masks, cfg.reassign_margin, max_views=cfg.reassign_views,
+                                           depth_tol=cfg.reassign_depth_tol, background=cfg.background,
+                                           backend=cfg.backend))
     res.seconds = time.perf_counter() - t0
     res.iters = cfg.iters
     if cfg.harden:

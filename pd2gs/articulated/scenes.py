@@ -4,6 +4,8 @@
   lid opens by -angle about it, i.e. +angle about -x).
 * ``flap``: the same lid carrying a flap hinged on its front edge (a chain: base -> lid -> flap).
 * ``static``: the box and lid glued together (no movable body).
+* ``tray``: the glued box holding a tray that is hidden inside it in the first state and slides out of its
+  front face (-y) by ``tray_m`` metres (one prismatic body; the first state shows none of the tray).
 
 Ground-truth centres are posed here with :func:`rsart.kinematics.joint_motion` (numpy), independently
 of :class:`pd2gs.articulated.model.ArticulatedGaussians`, so tests can compare the two. Units metres and
@@ -22,7 +24,7 @@ from pd2gs.render import rasterize
 from pd2gs.synthetic import _surface_points, ring_cameras, scene_gaussians
 from rsart.kinematics import joint_motion
 
-SCENES = ("lid", "flap", "static")
+SCENES = ("lid", "flap", "static", "tray")
 
 
 @dataclass
@@ -63,9 +65,9 @@ class ArticulatedScene:
 
 
 def make_scene(name: str = "lid", n: int = 3000, angles_deg=(0.0, 20.0, 40.0, 60.0),
-               flap_deg=(0.0, 30.0, 10.0, 50.0), seed: int = 0) -> ArticulatedScene:
+               flap_deg=(0.0, 30.0, 10.0, 50.0), seed: int = 0, tray_m=(0.0, 0.12, 0.24, 0.36)) -> ArticulatedScene:
     """One of :data:`SCENES` with ``len(angles_deg)`` states (lid opening angles; ``flap_deg`` the flap's
-    angles relative to the lid, ``flap`` only)."""
+    angles relative to the lid, ``flap`` only; ``tray_m`` the tray's slide, ``tray`` only)."""
     if name not in SCENES:
         raise ValueError(f"unknown scene {name!r}; choose one of {', '.join(SCENES)}")
     means, quats, scales, colors, opac, labels = scene_gaussians(n, seed)
@@ -77,6 +79,17 @@ def make_scene(name: str = "lid", n: int = 3000, angles_deg=(0.0, 20.0, 40.0, 60
     if name == "lid":
         return ArticulatedScene(means, quats, scales, colors, opac, labels, [-1, 0], ["revolute"],
                                 lid_axis[None], lid_pivot[None], lid_vals[:, None])
+    if name == "tray":
+        g = torch.Generator().manual_seed(seed + 2)
+        nt = n // 4
+        tray = _surface_points([-0.2, -0.17, 0.12], [0.2, 0.17, 0.26], nt, g)
+        checks = 0.5 + 0.5 * torch.sign(torch.sin(25 * tray[:, 0:1]) * torch.sin(25 * tray[:, 1:2] + 9 * tray[:, 2:3]))
+        cat = lambda a, b: torch.cat([a, b])  # noqa: E731
+        return ArticulatedScene(cat(means, tray), cat(quats, quats[:nt]), cat(scales, scales[:nt]),
+                                cat(colors, torch.tensor([0.95, 0.85, 0.2]) * (0.5 + 0.5 * checks)),
+                                cat(opac, opac[:nt]), cat(torch.zeros_like(labels), torch.ones(nt, dtype=torch.long)),
+                                [-1, 0], ["prismatic"], np.array([[0.0, -1.0, 0.0]]), np.array([[0.0, 0.0, 0.19]]),
+                                np.asarray(tray_m, dtype=np.float64)[: len(angles_deg), None])
     g = torch.Generator().manual_seed(seed + 1)
     nf = n // 6
     flap = _surface_points([-0.25, -0.23, 0.24], [0.25, -0.21, 0.40], nf, g)

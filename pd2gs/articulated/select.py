@@ -6,13 +6,15 @@ held-out (``test``) views of every state with a complexity penalty:
     score = L1_heldout + penalty x K        (K = number of movable bodies; L1 mean per pixel and channel)
 
 so an extra body must lower the held-out colour error by more than ``penalty`` to stay (the default
-1e-3 is a quarter of one 8-bit level per pixel). The
-greedy loop applies the best-scoring edit while it improves the score:
+1e-3 is a quarter of one 8-bit level per pixel). Every round screens each candidate by its score as
+built (no re-fit: a merge of two pieces of one rigid part, or a re-parent whose relative joint comes from
+stage 1's trajectories, already renders well), then re-fits only the ``refit_top`` best and the incumbent
+the same way; the greedy loop applies the best re-fitted edit while it improves the score:
 
 * ``merge(a, b)``: b's Gaussians join a (both children of the same parent); a's joint is kept.
 * ``prune(b)``: b's Gaussians join its parent; b's joint is dropped (b must have no children).
 * ``reparent(b, p)``: b hangs on p instead; its joint is re-estimated relative to p with
-  :func:`pd2gs.discovery.kinematics.estimate_joint` on b's centres seen in p's frame in every state.
+  :func:`pd2gs.kinematics.estimate_joint` on b's centres seen in p's frame in every state.
 * ``swap(b)``: b's joint type changes (revolute <-> prismatic), parameters from discovery's Kabsch fit
   (``robust_rigid`` + ``revolute_params`` / ``prismatic_params``) on the same centres.
 
@@ -28,7 +30,7 @@ import torch
 from torch import nn
 
 from pd2gs.data import Frame
-from pd2gs.discovery.kinematics import estimate_joint, prismatic_params, revolute_params, robust_rigid
+from pd2gs.kinematics import estimate_joint, prismatic_params, revolute_params, robust_rigid
 
 from .fit import FitConfig, evaluate_views, fit_articulated
 from .model import ArticulatedGaussians
@@ -36,12 +38,14 @@ from .model import ArticulatedGaussians
 
 @dataclass
 class SelectConfig:
-    """``penalty`` cost of one movable body in held-out mean L1 units; ``refit`` the fit used on every candidate (its
-    ``iters`` are the short re-fit); ``max_rounds`` greedy rounds."""
+    """``penalty`` cost of one movable body in held-out mean L1 units; ``refit`` the fit used on the screened
+    candidates (its ``iters`` are the short re-fit); ``refit_top`` how many candidates per round are re-fitted
+    after screening (None: all); ``max_rounds`` greedy rounds."""
 
     penalty: float = 1e-3
     refit: FitConfig = field(default_factory=lambda: FitConfig(iters=120))
     max_rounds: int = 6
+    refit_top: int | None = 3
 
 
 @dataclass
@@ -205,8 +209,14 @@ def select_model(model: ArticulatedGaussians, frames: list[Frame], masks=None, c
     best_score = score(best, frames, cfg)
     sel = Selection(best, best_score, [{"edit": "start", "bodies": best.num_bodies, "score": best_score}])
     for _ in range(cfg.max_rounds):
+        cands = candidates(best, ref, trajectories)
+        if cfg.refit_top is not None and len(cands) > cfg.refit_top:
+            screened = sorted(((score(c, frames, cfg), i) for i, (_, c) in enumerate(cands)))
+            for sc, i in screened:
+                sel.log.append({**cands[i][0], "screen": sc})
+            cands = [cands[i] for _, i in screened[: cfg.refit_top]]
         trials = []
-        for edit, cand in candidates(best, ref, trajectories):
+        for edit, cand in cands:
             fit_articulated(cand, frames, masks, cfg.refit)
             trials.append((score(cand, frames, cfg), edit, cand))
             sel.log.append({**edit, "score": trials[-1][0]})

@@ -4,21 +4,26 @@ Paper constants are the defaults where the paper gives one (2 % cluster merge, 1
 negative prompts, r < 0.05 revolute rule). The paper gives no numbers for τ_mot, τ_vis, the TSDF voxel
 size or the split minimum scale; ours are marked "ours" below. Units: metres (scene units), radians.
 
+Two modes (docs/pd2gs-parts.md):
+
+* ``mode="articulated"`` (default, ours): stage-1 field -> initial articulated model (counter, rigid-motion
+  clusters, Kabsch joints) -> one articulated Gaussian fit of geometry, ownership and joints against every
+  training view of every state -> model selection on held-out views -> meshes.
+* ``mode="paper"`` (the paper's pipeline, kept as an ablation): stage-1 field -> trajectory clustering ->
+  SAM-prompted refinement with boundary-aware splitting -> centre-based Kabsch joints with the paper's
+  type rule -> meshes.
+
 Ablation switches (docs/pd2gs-parts.md has the table):
 
-* ``refine``          — False: skip the SAM-prompted refinement + boundary-aware splitting.
 * ``n_states``        — 2 or 4 (None = every state of the field): which interaction states are used.
-* ``mask_provider``   — "grabcut" (default) | "sam" | "oracle" (the dataset's true part masks).
 * ``counter``         — "trajectory" (default, ours) | "motion" (ours) | "vlm" (the paper's) | "given" (oracle
   count from meta.json).
-* ``joint_rule``      — "paper" (residual-rank rule) | "bic" (ours: translation vs rotation by BIC).
-* ``split_disconnected`` — ours: split each motion cluster into spatially connected pieces.
-* ``articulate``      — ours: photometric refinement of joints and joint types (False = paper's joints).
-* ``chain``           — ours, inside the articulation fit: chained joints relative to their parent part.
-* ``absorb``          — ours, inside the articulation fit: clusters another motion (or none) explains as well join it.
-* ``articulate_ref``  — ours: the state whose Gaussians the articulation fit moves ("start" | "end").
-* ``part_ref``        — ours: each part moved from the state that shows it best (False: all from articulate_ref).
-* ``cluster``         — "trajectory" (paper) | "rigid" (ours): how dynamic Gaussians are grouped into parts.
+* ``fit_silhouette``  — articulated: weight of the object-silhouette loss (0 = RGB only).
+* ``fit_depth``       — articulated: weight of a depth loss (0, the default: PD²GS is RGB-only).
+* ``select``          — articulated: False keeps the initial part count, tree and types.
+* ``refine``, ``mask_provider``, ``cluster``, ``split_disconnected`` — paper mode's segmentation.
+* ``joint_rule``      — the Kabsch joints' type rule, "paper" or "bic" (None: the mode's own: "paper" in mode
+  "paper", "bic" for the articulated initialisation).
 """
 from __future__ import annotations
 
@@ -52,6 +57,10 @@ class VLMConfig:
 @dataclass
 class DiscoveryConfig:
     """Every knob of ``pd2gs.discovery.pipeline.discover``."""
+
+    mode: Literal["articulated", "paper"] = "articulated"
+    """"articulated" (default, ours): one articulated Gaussian model fitted end to end; "paper": the paper's
+    centre-based pipeline (ablation)."""
 
     # --- coarse segmentation (paper Sec. 3.3)
     tau_mot: float = 0.15
@@ -134,9 +143,10 @@ class DiscoveryConfig:
     """the trainer's render background (None = black)."""
 
     # --- kinematics (paper App. A.3, A.4)
-    joint_rule: Literal["paper", "bic"] = "bic"
-    """joint-type rule: "paper" (residual rank) or "bic" (ours: translation vs rotation by BIC); "bic"
-    measured better (docs/pd2gs-parts.md); both verdicts are always reported."""
+    joint_rule: Literal["paper", "bic"] | None = None
+    """type rule of the centre-based Kabsch joints: "paper" (residual rank) or "bic" (ours: translation vs
+    rotation by BIC); None: the mode's own (mode "paper": "paper"; mode "articulated": "bic" for the initial
+    joints, whose type model selection may swap). Both verdicts are always reported."""
     paper_r_thresh: float = 0.05
     """paper: r = (s2 + s3) / s1 < 0.05 -> revolute."""
     bic_noise_rel: float = 1e-3
@@ -145,32 +155,28 @@ class DiscoveryConfig:
     """ours: RANSAC inlier threshold (fraction of the part extent)."""
     robust_iters: int = 200
     """RANSAC iterations of the rigid fit."""
-    articulate: bool = True
-    """ours: refine every joint (and its type) by rendering the rigidly articulated reference field against
-    the training images (pd2gs/discovery/articulate.py); False = the paper's centre-based joints only."""
-    articulate_iters: int = 300
-    """Adam steps per fit (the type trial fits once more per part)."""
-    articulate_views: int = 24
-    """training views per state (evenly spaced)."""
-    articulate_max_side: int = 160
-    """those views are rendered at most this large (the trainer's size)."""
-    articulate_ref: Literal["start", "end"] = "start"
-    """ours: the state whose Gaussians are articulated: the static base's, and every part's when part_ref
-    is off."""
-    part_ref: bool = True
-    """ours: each part's Gaussians from the state whose views show it best (a drawer's inside is hidden
-    while it is closed, so its field there is a guess)."""
-    relabel: bool = True
-    """ours: after the fit, relabel Gaussians by multi-view colour consistency under each part's motion,
-    then re-fit the joints."""
-    chain: bool = True
-    """ours: try each part as hanging from a touching movable part."""
-    absorb: bool = True
-    """ours: a cluster whose pixels another cluster's joint (or none) renders as well joins it, and touching
-    clusters one re-fitted joint moves as well merge (over-split parts, still clusters;
-    pd2gs/discovery/consolidate.py)."""
-    absorb_margin: float = 0.02
-    """ours: "as well" = at most this much worse (relative colour error)."""
+
+    # --- the articulated model (mode "articulated"; pd2gs/articulated/)
+    fit_iters: int = 600
+    """Adam steps of the articulated fit (one random training view per step)."""
+    fit_max_side: int = 80
+    """the fit's training views are rendered at most this large (intrinsics scaled)."""
+    fit_silhouette: float = 0.5
+    """weight of the L1 between rendered alpha and the view's object mask (0: RGB only)."""
+    fit_depth: float = 0.0
+    """weight of an L1 depth loss on pixels with a captured depth (0: RGB only, as PD²GS)."""
+    fit_min_opacity: float = 0.02
+    """stage-1 Gaussians less opaque than this are left out of the articulated model."""
+    select: bool = True
+    """model selection: merge / prune / re-parent / type swap while the penalised held-out loss improves."""
+    select_penalty: float = 1e-3
+    """cost of one movable body in held-out mean-L1 units (pd2gs/articulated/select.py)."""
+    select_iters: int = 120
+    """Adam steps of each candidate's re-fit."""
+    select_rounds: int = 6
+    """at most this many accepted edits."""
+    final_iters: int = 300
+    """Adam steps of the fit after selection (0: none)."""
 
     # --- meshing (paper App. A.2)
     voxel_size: float | None = None

@@ -26,7 +26,7 @@ from scipy.spatial import cKDTree
 
 from rsart.errors import RsartError
 
-from .kinematics import kabsch
+from pd2gs.kinematics import kabsch
 
 PROMPT = ("Compare the two images. How many components moved? "
           "Answer: 'Number of moved components: [N]'.")

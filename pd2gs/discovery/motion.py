@@ -71,7 +71,7 @@ def cluster_trajectories(means_dyn: np.ndarray, n_parts: int, min_frac: float = 
 
 def _rigid_per_state(means: np.ndarray, members: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Kabsch motions (K, 3, 3), (K, 3) from state 0 to every state of the ``members`` Gaussians."""
-    from .kinematics import kabsch
+    from pd2gs.kinematics import kabsch
 
     K = means.shape[0]
     Rs, ts = np.tile(np.eye(3), (K, 1, 1)), np.zeros((K, 3))

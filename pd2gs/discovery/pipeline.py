@@ -1,18 +1,26 @@
-"""PD²GS part discovery end to end on one trained object: parts -> refinement -> kinematics -> meshes.
+"""PD²GS part discovery on one trained object, as one pipeline of steps, each its own function:
+
+    stage 1 -> initialisation -> articulated fit -> model selection -> meshes -> ObjectResult
+
+(``mode="articulated"``, the default), or the paper's pipeline, kept as an ablation (``mode="paper"``):
+
+    stage 1 -> trajectory clustering -> SAM-prompted refinement -> centre-based Kabsch joints -> meshes
 
     from pd2gs.discovery.pipeline import discover, discover_safe, method_block
     from pd2gs.discovery.submission import write_submission
     res = discover(field_or_model, rsart.load("data/obj"), DiscoveryConfig())
-    write_submission({obj.id: res}, "out/sub", method_block(cfg, res))
+    write_submission({obj.id: res}, "out/sub", method_block(cfg))
 
 ``field_or_model``: a :class:`~pd2gs.discovery.field.StateField` or a trained model with
-``state_gaussians(state_id)`` (see :func:`~pd2gs.discovery.field.as_state_field`).
+``state_gaussians(state_id)`` (see :func:`~pd2gs.discovery.field.as_state_field`). The steps share one
+:class:`Discovery` record.
 """
 from __future__ import annotations
 
 import logging
 import time
 import traceback
+from dataclasses import dataclass, field
 from typing import Any
 
 import cv2
@@ -20,19 +28,50 @@ import numpy as np
 import torch
 
 import pd2gs
+from pd2gs.articulated.fit import FitConfig, evaluate_views, fit_articulated
+from pd2gs.articulated.model import ArticulatedGaussians
+from pd2gs.articulated.select import SelectConfig, select_model
+from pd2gs.data import Frame
+from pd2gs.kinematics import JointFit, estimate_joint
 from rsart.camera import Camera
 
 from . import motion
 from .config import DiscoveryConfig
-from .counter import count_by_trajectories, count_rigid_motions, local_rigid_motions, sample_image_pairs, vlm_count
 from .field import StateField, as_state_field
-from .kinematics import estimate_joint
+from .initialise import count_parts, init_from_field
 from .masks import make_provider, sample_prompts, visibility_sets
 from .meshing import clean_mesh, render_depth, tsdf_fuse
 from .refine import boundary_split
 from .submission import ObjectFailure, ObjectResult, PartResult
 
 log = logging.getLogger(__name__)
+
+
+@dataclass
+class Discovery:
+    """What the steps of one object's discovery share.
+
+    ``fld``: the stage-1 per-state Gaussians of the used ``states`` (replaced by the articulated model's
+    posed Gaussians after the fit); ``labels`` (N,) 0 = static base, 1..K movable parts of ``fld``;
+    ``joints``: label -> joint (world frame at the ``start`` state, values relative to it); ``model``: the
+    articulated model (mode "articulated"); ``frames``/``masks``: its training and held-out views and
+    their object silhouettes; ``diag``: diagnostics written to the result.
+    """
+
+    obj: Any
+    cfg: DiscoveryConfig
+    states: list[str]
+    start: str
+    end: str
+    fld: StateField
+    labels: np.ndarray | None = None
+    joints: dict[int, JointFit] = field(default_factory=dict)
+    model: ArticulatedGaussians | None = None
+    ref_index: int = 0
+    frames: list[Frame] = field(default_factory=list)
+    masks: list[torch.Tensor | None] = field(default_factory=list)
+    stage1_means: np.ndarray | None = None
+    diag: dict[str, Any] = field(default_factory=dict)
 
 
 # ----------------------------------------------------------------------------- states and views
@@ -82,33 +121,6 @@ def _t(a) -> torch.Tensor:
 
 
 # ----------------------------------------------------------------------------- steps
-def count_parts(fld: StateField, dyn: np.ndarray, obj, states: list[str], cfg: DiscoveryConfig) -> tuple[int, dict]:
-    """Number of movable parts by ``cfg.counter`` -> (n, diagnostics)."""
-    if cfg.counter == "given":
-        n = cfg.given_count if cfg.given_count is not None else len(obj.meta.parts) - 1
-        return int(n), {"counter": "given"}
-    if cfg.counter == "vlm":
-        pairs = sample_image_pairs(obj, states, cfg.vlm.n_pairs, cfg.vlm.seed)
-        n, answers = vlm_count(pairs, cfg.vlm.url, cfg.vlm.model, cfg.vlm.api_key_env, cfg.vlm.timeout_s)
-        return n, {"counter": "vlm", "answers": answers}
-    if cfg.counter == "trajectory":
-        sel = dyn & (np.asarray(fld.opacities).reshape(-1) >= cfg.count_min_opacity)
-        if sel.sum() < 10:
-            sel = dyn
-        if sel.sum() == 0:
-            return 0, {"counter": "trajectory", "n_voters": 0}
-        n, diag = count_by_trajectories(local_rigid_motions(fld.means[:, sel], seed=cfg.seed), cfg.max_parts,
-                                        cfg.min_silhouette, cfg.seed)
-        return n, {"counter": "trajectory", "n_voters": int(sel.sum()), **diag}
-    md = fld.means[:, dyn]
-    if md.shape[1] < 3:
-        return 0, {"counter": "motion", "support": []}
-    dmax = float(motion.max_displacement(md).max())
-    mc = count_rigid_motions(md, cfg.ransac_thresh_rel * dmax, cfg.min_part_frac, cfg.max_parts,
-                             cfg.ransac_iters, cfg.seed)
-    return mc.n, {"counter": "motion", "support": mc.support}
-
-
 def refine_parts(fld: StateField, labels: np.ndarray, obj, states: list[str], ref: str, cfg: DiscoveryConfig
                  ) -> tuple[StateField, np.ndarray, dict]:
     """Visibility prompts -> masks -> boundary-aware splitting (-> fine-tune) in the reference state."""
@@ -171,25 +183,10 @@ def part_meshes(fld: StateField, labels: np.ndarray, obj, sid: str, cfg: Discove
     return out, whole
 
 
-def articulate_joints(fld: StateField, labels: np.ndarray, joints: dict, obj, cfg: DiscoveryConfig
-                      ) -> tuple[dict, np.ndarray, dict]:
-    """Photometric refinement of the centre-based joints (:mod:`.articulate`) on each state's train views."""
-    from .articulate import FitSettings, fit_articulation
-
-    views = [[(cam, _resize(view.rgb, cam)) for _, cam, view in
-              pick_views(obj, s, cfg.articulate_views, cfg.articulate_max_side)] for s in fld.state_ids]
-    ev = obj.meta.eval_states
-    settings = FitSettings(iters=cfg.articulate_iters, relabel=cfg.relabel, chain=cfg.chain, absorb=cfg.absorb,
-                           absorb_margin=cfg.absorb_margin, part_ref=cfg.part_ref)
-    return fit_articulation(fld, labels, joints, views, ev[cfg.articulate_ref], ev["end"], settings, cfg.background,
-                            cfg.render_backend, cfg.seed, start=ev["start"])
-
-
 # ----------------------------------------------------------------------------- the pipeline
-def discover(field_or_model: Any, obj, config: DiscoveryConfig | None = None) -> ObjectResult:
-    """Parts, joints and meshes of one object (an ``rsart.load`` RSArtObject) from its trained field."""
-    cfg = config or DiscoveryConfig()
-    t0 = time.perf_counter()
+# ----------------------------------------------------------------------------- stage 1
+def stage1(field_or_model: Any, obj, cfg: DiscoveryConfig) -> Discovery:
+    """The used states of the trained field (``cfg.n_states``; start and end always) -> a Discovery."""
     ev = obj.meta.eval_states
     all_states = getattr(field_or_model, "state_ids", None)  # a StateField, or a model that lists its states
     if all_states is None:                                   # else: the multi-part states (the paper trains on them)
@@ -199,47 +196,206 @@ def discover(field_or_model: Any, obj, config: DiscoveryConfig | None = None) ->
         if s not in states:
             raise ObjectFailure(f"the field has no {s!r} state (eval_states needs it; field states: {list(all_states)})")
     fld = as_state_field(field_or_model, states)
-    diag: dict[str, Any] = {"states": states, "n_gaussians": fld.n}
+    return Discovery(obj, cfg, states, ev["start"], ev["end"], fld, diag={"mode": cfg.mode, "states": states,
+                                                                         "n_gaussians": fld.n})
+
+
+# ----------------------------------------------------------------------------- mode "articulated"
+def training_views(obj, states: list[str], cfg: DiscoveryConfig) -> tuple[list[Frame], list[torch.Tensor | None]]:
+    """Every captured view of the used states, at most ``cfg.fit_max_side`` px (intrinsics scaled), keeping
+    the dataset's train/test split -> (frames, per frame the object silhouette (H, W) in {0, 1} = mask > 0,
+    or None where the view has no mask or ``cfg.fit_silhouette`` is 0). Depth is read only when
+    ``cfg.fit_depth`` > 0. A state with no ``test`` view lends every fifth train view to model selection."""
+    frames: list[Frame] = []
+    masks: list[torch.Tensor | None] = []
+    for k, sid in enumerate(states):
+        views = obj.states[sid].views
+        has_test = any(v.split == "test" for v in views)
+        for i, v in enumerate(views):
+            cam = v.camera
+            s = min(1.0, cfg.fit_max_side / max(cam.width, cam.height))
+            if s < 1.0:
+                cam = cam.scaled(max(1, round(cam.width * s)), max(1, round(cam.height * s)))
+            rgb = torch.from_numpy(_resize(v.rgb, cam).astype(np.float32) / 255.0)
+            depth = None
+            if cfg.fit_depth > 0 and v.has_depth:
+                depth = torch.from_numpy(_resize(v.depth, cam, nearest=True).astype(np.float32))
+            split = v.split if has_test else ("test" if i % 5 == 4 else "train")
+            frames.append(Frame(rgb, depth, _t(cam.K), _t(cam.w2c), k, split, v.id))
+            mask = None
+            if cfg.fit_silhouette > 0 and v.has_mask:
+                mask = torch.from_numpy((_resize(v.mask, cam, nearest=True) > 0).astype(np.float32))
+            masks.append(mask)
+    return frames, masks
+
+
+def fit_config(d: Discovery, iters: int) -> FitConfig:
+    """The articulated fit's settings for this object (its gauge state, background, loss weights)."""
+    c = d.cfg
+    return FitConfig(iters=iters, silhouette=c.fit_silhouette, depth=c.fit_depth, ref_state=d.ref_index,
+                     background=tuple(c.background) if c.background is not None else (0.0, 0.0, 0.0),
+                     backend=c.render_backend, seed=c.seed)
+
+
+def initialise(d: Discovery) -> None:
+    """Part count, rigid-motion clusters and Kabsch joints of stage 1 -> the first (flat) articulated model."""
+    init = init_from_field(d.fld, d.states, d.start, d.end, cfg=d.cfg, obj=d.obj, min_opacity=d.cfg.fit_min_opacity)
+    d.diag["count"] = init.count
+    if init.model.num_bodies < 2:
+        raise ObjectFailure(f"no movable part found (count {init.count.get('n')}, "
+                            f"{int(motion.dynamic_mask(d.fld.means, d.cfg.tau_mot).sum())} dynamic Gaussians)")
+    d.model, d.ref_index = init.model, init.ref_index
+    d.stage1_means = d.fld.means[:, init.keep]
+    d.diag["init"] = {"bodies": init.model.num_bodies, "n_gaussians": int(init.keep.sum()),
+                      "sizes": np.bincount(init.labels).tolist()}
+
+
+def fit(d: Discovery) -> None:
+    """Geometry, ownership and joints fitted together on every training view of every state."""
+    res = fit_articulated(d.model, d.frames, d.masks, fit_config(d, d.cfg.fit_iters))
+    d.diag["fit"] = {"seconds": res.seconds, "loss_first_last": [res.losses[0], res.losses[-1]],
+                     "reassigned": res.reassigned}
+
+
+def select(d: Discovery) -> None:
+    """Model selection on the held-out views (merge / prune / re-parent / type swap), then a last fit."""
+    t0 = time.perf_counter()
+    sel = select_model(d.model, d.frames, d.masks,
+                       SelectConfig(d.cfg.select_penalty, fit_config(d, d.cfg.select_iters), d.cfg.select_rounds),
+                       d.stage1_means)
+    d.model = sel.model
+    d.diag["select"] = {"seconds": time.perf_counter() - t0, "score": sel.score, "log": sel.log}
+    if d.cfg.final_iters > 0:
+        res = fit_articulated(d.model, d.frames, d.masks, fit_config(d, d.cfg.final_iters))
+        d.diag["final_fit"] = {"seconds": res.seconds, "loss_first_last": [res.losses[0], res.losses[-1]]}
+
+
+@torch.no_grad()
+def posed_field(model: ArticulatedGaussians, states: list[str]) -> StateField:
+    """The hard-owned model posed in each training state as a StateField (labels = owners); its ``deform``
+    poses the joint values interpolated between two states (unseen states by posing the joints)."""
+    model.harden()
+    g = model.gaussians
+    posed = [model.pose(k) for k in range(len(states))]
+    scales = torch.exp(g.log_scales).double().numpy()
+
+    def deform(a: str, b: str, t: float):
+        v = (1 - t) * model.values[states.index(a)] + t * model.values[states.index(b)]
+        m, q = model.pose(values=v)
+        return m.double().numpy(), q.double().numpy(), scales
+
+    return StateField(list(states), np.stack([m.double().numpy() for m, _ in posed]),
+                      np.stack([q.double().numpy() for _, q in posed]), np.tile(scales, (len(states), 1, 1)),
+                      g.colors.detach().double().numpy(), g.opacities.detach().double().numpy().reshape(-1),
+                      model.labels().numpy(), deform)
+
+
+@torch.no_grad()
+def model_joints(model: ArticulatedGaussians, states: list[str], start: str, end: str) -> dict[int, JointFit]:
+    """Each movable body's joint as the submission writes it: axis and pivot in the world frame at ``start``
+    (the canonical frame, where every value is 0), values per state relative to its parent, the axis
+    signed so the ``end`` value is positive. Both Kabsch type rules are evaluated on the body's posed centres
+    in its parent's frame and reported beside the fitted type."""
+    s0, s1 = states.index(start), states.index(end)
+    lab = model.labels()
+    out = {}
+    for b in range(1, model.num_bodies):
+        j, p = b - 1, model.parent[b]
+        axis = model.unit_axes[j].double().numpy()
+        vals = model.values[:, j].double().numpy()
+        vals = vals - vals[s0]
+        if vals[s1] < 0:
+            axis, vals = -axis, -vals
+        own = lab == b
+        origin = model.pivots[j].double().numpy()
+        if model.joint_types[j] == "prismatic" and bool(own.any()):
+            origin = model.gaussians.means[own].double().mean(0).numpy()
+        rel = []
+        for k in range(len(states)):
+            bp = model.body_poses(k)
+            x = (bp.R[b] @ model.gaussians.means[own].T).T + bp.t[b]
+            rel.append(((x - bp.t[p]) @ bp.R[p]).double().numpy())
+        kabsch = estimate_joint(np.stack(rel), states, start, end, "bic") if own.sum() >= 3 else None
+        out[b] = JointFit(model.joint_types[j], axis, origin, {s: float(vals[k]) for k, s in enumerate(states)},
+                          "articulated", kabsch.type_paper if kabsch else model.joint_types[j],
+                          kabsch.type_bic if kabsch else model.joint_types[j],
+                          {"parent": int(p), "n_gaussians": int(own.sum())})
+    return out
+
+
+def articulated_parts(d: Discovery) -> None:
+    """Mode "articulated": initialise -> fit -> select -> the posed model's field, labels and joints."""
+    d.frames, d.masks = training_views(d.obj, d.states, d.cfg)
+    initialise(d)
+    fit(d)
+    if d.cfg.select:
+        select(d)
+    d.fld = posed_field(d.model, d.states)
+    d.labels = d.fld.labels
+    d.joints = {b: jf for b, jf in model_joints(d.model, d.states, d.start, d.end).items()
+                if (d.labels == b).sum() >= 3}
+    d.diag["test_l1"] = evaluate_views(d.model, d.frames, "test", fit_config(d, 0).background, d.cfg.render_backend)
+    d.diag["tree"] = {f"p{b}": (f"p{p}" if p else "static") for b, p in enumerate(d.model.parent) if b}
+
+
+# ----------------------------------------------------------------------------- mode "paper"
+def paper_parts(d: Discovery) -> None:
+    """Mode "paper": count, trajectory clustering, refinement, centre-based Kabsch joints (the paper's type rule
+    unless ``cfg.joint_rule`` names another)."""
+    cfg, fld = d.cfg, d.fld
     dyn = motion.dynamic_mask(fld.means, cfg.tau_mot)
-    diag["n_dynamic"] = int(dyn.sum())
-    n_parts, cdiag = count_parts(fld, dyn, obj, states, cfg)
-    diag["count"] = {"n": n_parts, **cdiag}
+    d.diag["n_dynamic"] = int(dyn.sum())
+    n_parts, cdiag = count_parts(fld, dyn, d.obj, d.states, cfg)
+    d.diag["count"] = {"n": n_parts, **cdiag}
     if n_parts < 1 or not dyn.any():
         raise ObjectFailure(f"no movable part found ({int(dyn.sum())} dynamic Gaussians, count {n_parts})")
     labels = motion.coarse_labels(fld.means, n_parts, cfg.tau_mot, cfg.min_cluster_frac, cfg.kmeans_seed,
                                   cfg.kmeans_n_init, cfg.cluster)
     if cfg.split_disconnected:
-        labels = motion.split_disconnected(fld.means[fld.index(ev["start"])], labels,
+        labels = motion.split_disconnected(fld.means[fld.index(d.start)], labels,
                                            max(3, int(cfg.min_cluster_frac * max(1, int(dyn.sum())))))
-        diag["count"]["after_spatial_split"] = int(labels.max())
-    diag["coarse_sizes"] = np.bincount(labels).tolist()
+        d.diag["count"]["after_spatial_split"] = int(labels.max())
+    d.diag["coarse_sizes"] = np.bincount(labels).tolist()
     if cfg.refine:
-        fld, labels, diag["refine"] = refine_parts(fld, labels, obj, states, ev["start"], cfg)
+        fld, labels, d.diag["refine"] = refine_parts(fld, labels, d.obj, d.states, d.start, cfg)
     fld.labels = labels
-    joints = {}
-    for p in range(1, int(labels.max()) + 1):
-        sel = labels == p
-        if sel.sum() >= 3:
-            joints[p] = estimate_joint(fld.means[:, sel], fld.state_ids, ev["start"], ev["end"], cfg.joint_rule,
-                                       cfg.paper_r_thresh, cfg.bic_noise_rel, cfg.robust_thresh_rel,
-                                       cfg.robust_iters, cfg.seed)
-    if cfg.articulate and joints:
-        joints, labels, diag["articulate"] = articulate_joints(fld, labels, joints, obj, cfg)
-        joints = {p: j for p, j in joints.items() if (labels == p).sum() >= 3}
-        fld.labels = labels
-    ref_means = fld.means[fld.index(ev["start"])]
+    d.fld, d.labels = fld, labels
+    d.joints = {p: estimate_joint(fld.means[:, labels == p], fld.state_ids, d.start, d.end, cfg.joint_rule or "paper",
+                                  cfg.paper_r_thresh, cfg.bic_noise_rel, cfg.robust_thresh_rel, cfg.robust_iters,
+                                  cfg.seed)
+                for p in range(1, int(labels.max()) + 1) if (labels == p).sum() >= 3}
+
+
+# ----------------------------------------------------------------------------- meshes and the result
+def result(d: Discovery, t0: float) -> ObjectResult:
+    """TSDF meshes of every part and the whole object in the mesh states -> the ObjectResult."""
+    cfg, fld, labels = d.cfg, d.fld, d.labels
+    ref_means = fld.means[fld.index(d.start)]
     extent = float(np.linalg.norm(np.ptp(ref_means, axis=0)))
     voxel = cfg.voxel_size or extent / 128
+    ev = d.obj.meta.eval_states
     mesh_states = [ev.get(s, s) for s in cfg.mesh_states.split(",")]
-    meshes = {sid: part_meshes(fld, labels, obj, sid, cfg, voxel) for sid in mesh_states}
+    meshes = {sid: part_meshes(fld, labels, d.obj, sid, cfg, voxel) for sid in mesh_states}
     parts = [PartResult("static", 0, {sid: meshes[sid][0].get(0) for sid in mesh_states})]
     parts += [PartResult(f"p{p}", p, {sid: meshes[sid][0].get(p) for sid in mesh_states}, j)
-              for p, j in joints.items()]
-    diag["seconds"] = time.perf_counter() - t0
-    diag["joints"] = {p.name: {"type": p.joint.type, "type_paper": p.joint.type_paper, "type_bic": p.joint.type_bic,
-                               **p.joint.diagnostics} for p in parts if p.joint is not None}
-    return ObjectResult(obj.meta.object_id, parts, {sid: meshes[sid][1] for sid in mesh_states}, diag, fld)
+              for p, j in d.joints.items()]
+    d.diag["seconds"] = time.perf_counter() - t0
+    d.diag["joints"] = {p.name: {"type": p.joint.type, "type_paper": p.joint.type_paper,
+                                 "type_bic": p.joint.type_bic, **p.joint.diagnostics}
+                        for p in parts if p.joint is not None}
+    return ObjectResult(d.obj.meta.object_id, parts, {sid: meshes[sid][1] for sid in mesh_states}, d.diag, fld)
 
+
+# ----------------------------------------------------------------------------- the pipeline
+def discover(field_or_model: Any, obj, config: DiscoveryConfig | None = None) -> ObjectResult:
+    """Parts, joints and meshes of one object (an ``rsart.load`` RSArtObject) from its trained field."""
+    t0 = time.perf_counter()
+    d = stage1(field_or_model, obj, config or DiscoveryConfig())
+    if d.cfg.mode == "paper":
+        paper_parts(d)
+    else:
+        articulated_parts(d)
+    return result(d, t0)
 
 def discover_safe(field_or_model: Any, obj, config: DiscoveryConfig | None = None) -> ObjectResult | ObjectFailure:
     """:func:`discover` that returns an ObjectFailure (reason + traceback logged) instead of raising."""
@@ -252,11 +408,15 @@ def discover_safe(field_or_model: Any, obj, config: DiscoveryConfig | None = Non
 
 def method_block(cfg: DiscoveryConfig, states_used: int | None = None) -> dict:
     """The submission's ``method`` object for these settings (ablation flags included)."""
-    return {"name": "PD2GS", "version": pd2gs.__version__, "inputs": ["rgb"], "camera_poses": "gt",
+    art = cfg.mode == "articulated"
+    inputs = ["rgb"] + (["mask"] if art and cfg.fit_silhouette > 0 else []) + (["depth"] if art and cfg.fit_depth > 0 else [])
+    return {"name": "PD2GS", "version": pd2gs.__version__, "inputs": inputs, "camera_poses": "gt",
             "states_used": states_used if states_used is not None else (cfg.n_states or "all"),
-            "discovery": {"counter": cfg.counter, "refine": cfg.refine, "articulate": cfg.articulate,
-                          "relabel": cfg.relabel, "mask_provider": cfg.mask_provider,
-                          "joint_rule": cfg.joint_rule, "n_states": cfg.n_states}}
+            "discovery": {"mode": cfg.mode, "counter": cfg.counter, "n_states": cfg.n_states,
+                          **({"refine": cfg.refine, "mask_provider": cfg.mask_provider, "cluster": cfg.cluster,
+                              "joint_rule": cfg.joint_rule or "paper"} if cfg.mode == "paper" else
+                             {"silhouette": cfg.fit_silhouette, "depth": cfg.fit_depth, "select": cfg.select,
+                              "fit_max_side": cfg.fit_max_side})}}
 
 
 def dataset_block(data: str) -> dict:

@@ -21,7 +21,7 @@ import trimesh
 from rsart.errors import RsartError
 from rsart.io import atomic_dir, atomic_write_bytes, write_json
 
-from .kinematics import JointFit
+from pd2gs.kinematics import JointFit
 
 FORMAT = "rsart-submission/1"
 log = logging.getLogger(__name__)

@@ -18,7 +18,7 @@ import trimesh
 REPO = Path(__file__).resolve().parents[2]
 # --threads 1 everywhere: bitwise equality needs one thread count (the default, cores / workers, would
 # differ between the 1- and 2-worker runs)
-FAST = ["--iters", "40", "--size", "64x48", "--no-refine", "--no-articulate", "--quiet", "--threads", "1"]
+FAST = ["--iters", "40", "--size", "64x48", "--mode", "paper", "--no-refine", "--quiet", "--threads", "1"]
 
 
 def _has_ray() -> bool:

@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from pd2gs.discovery.kinematics import (estimate_joint, kabsch, paper_ratio, revolute_params,
+from pd2gs.kinematics import (estimate_joint, kabsch, paper_ratio, revolute_params,
                                         rotation_axis_angle)
 from rsart.kinematics import joint_motion, rotation_matrix
 from synthetic import DOOR, DRAWER, STATES, articulated_means

@@ -34,7 +34,7 @@ def test_storage_furniture_45213(tmp_path):
     lo, hi = obj.twin.bounds(obj.twin.zero_config())
     fld, _ = perfect_field(obj.twin, obj.meta, states, n=3000, jitter=0.001 * float(np.linalg.norm(hi - lo)))
     # centre-based joints: the exact field's flat part colours do not reproduce the views (no photometric fit)
-    cfg = DiscoveryConfig(joint_rule="bic", split_disconnected=True, refine=False, mesh_views=8, articulate=False)
+    cfg = DiscoveryConfig(joint_rule="bic", split_disconnected=True, refine=False, mesh_views=8, mode="paper")
     res = discover(fld, obj, cfg)
     # two drawers with equal limits share one motion; the spatial split separates them
     assert res.diagnostics["count"]["n"] == 2 and res.diagnostics["count"]["after_spatial_split"] == 3

@@ -10,7 +10,7 @@ import trimesh
 import rsart
 from fixture_object import build_object, perfect_field
 from pd2gs.discovery import DiscoveryConfig
-from pd2gs.discovery.kinematics import JointFit
+from pd2gs.kinematics import JointFit
 from pd2gs.discovery.pipeline import discover, discover_safe, method_block
 from pd2gs.discovery.submission import ObjectFailure, ObjectResult, PartResult, write_submission
 from rsart.evaluation import load_ground_truth, read_submission, score_submission
@@ -72,7 +72,7 @@ def test_pipeline_end_to_end_scores(data, tmp_path):
     fld, _ = perfect_field(obj.twin, obj.meta, ["m0", "m1", "m2", "m3"], n=1500)
     # the paper's centre-based joints: this field is geometrically exact but its flat part colours do not
     # reproduce the textured views, so a photometric fit has nothing to go on (tests/.../test_articulate.py)
-    cfg = DiscoveryConfig(joint_rule="bic", mesh_views=6, refine_views=4, finetune_iters=5, articulate=False)
+    cfg = DiscoveryConfig(joint_rule="bic", mesh_views=6, refine_views=4, finetune_iters=5, mode="paper")
     res = discover(fld, obj, cfg)
     assert res.diagnostics["count"]["n"] == 2
     assert res.diagnostics["refine"]["splits"] > 0
