@@ -78,7 +78,7 @@ def main(argv: list[str] | None = None) -> int:
     data = prepare(args.work, args.objects, args.size, args.views)
     w, h = parse_size(args.size)
     tcfg = TrainConfig(iters=args.iters, size=(w // 2, h // 2))
-    dcfg = DiscoveryConfig() if args.discovery == "default" else DiscoveryConfig(refine=False, articulate=False)
+    dcfg = DiscoveryConfig() if args.discovery == "default" else DiscoveryConfig(mode="paper", refine=False)
     rows = []
     for n in counts:
         out = args.work / f"run-{args.backend}-w{n}"

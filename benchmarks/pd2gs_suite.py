@@ -3,9 +3,8 @@
 For each selected object: render the pd2gs protocol (4 states x 50 train + 10 test views, 320x240,
 plain background), train PD²GS (default ``TrainConfig``), discover parts/joints/meshes (default
 ``DiscoveryConfig``), and -- on the same trained fields, so they cost no extra training -- the
-discovery ablations (no refinement, oracle masks, given part count, without our photometric
-articulation fit, the paper's kinematics (centre-based joints and its type rule), 2 states instead
-of 4, no chained joints, rigid-motion clustering). Each object is one task of pd2gs's runner
+discovery ablations of ``ABLATIONS`` (the paper's pipeline, no silhouette loss, 2 states instead of 4,
+the given part count, no model selection, an added depth loss). Each object is one task of pd2gs's runner
 (``pd2gs/runner.py``, the one ``pd2gs run`` uses): ``--workers`` at once, in local processes or on Ray
 (``--backend ray [--address ADDR]``). Every configuration becomes one rsart-submission/1 that ``rsart-eval`` scores; the report has the paper-style table per category for the default, the wall time per
 object, and one row of category means per ablation.

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import math
 import os
 import socket
 import sys
@@ -211,6 +212,19 @@ def _train_stage(task: ObjectTask, obj, run: Path, timings: dict) -> None:
     timings["train_s"] = float(read_json(run / "metrics.json").get("seconds", 0.0))
 
 
+def _plain(obj: Any) -> Any:
+    """Diagnostics as JSON can hold them: numpy values as Python ones, non-finite numbers as None, keys as str."""
+    if isinstance(obj, dict):
+        return {str(k): _plain(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_plain(v) for v in obj]
+    if hasattr(obj, "tolist"):
+        return _plain(obj.tolist())
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj
+
+
 def _discover_stage(task: ObjectTask, obj, run: Path, timings: dict) -> list[str]:
     """Run every unfinished variant; -> the reasons of the variants that failed."""
     from .discovery.pipeline import discover_safe
@@ -242,7 +256,7 @@ def _discover_stage(task: ObjectTask, obj, run: Path, timings: dict) -> list[str
                 doc.update(status="failed", reason=str(res))
                 failed.append(f"{name}: {res}" if len(task.variants) > 1 else str(res))
             else:
-                doc.update(status="done", entry=object_entry(res, tmp))
+                doc.update(status="done", entry=object_entry(res, tmp), diagnostics=_plain(res.diagnostics))
             write_json(tmp / "result.json", doc)
         log.info("discovery [%s]: %s in %.1f s", name, doc["status"], secs)
     return failed

@@ -8,7 +8,7 @@ geometrically from ``temperature_start`` to ``temperature_end``; at the end the 
 
 Gauge: canonical geometry and joint values trade off (moving the canonical body and shifting every value
 gives the same renders), so the values of ``ref_state`` are held at their initial values (0 when the
-canonical frame is that state's pose, as :mod:`.init` builds it).
+canonical frame is that state's pose, as :mod:`pd2gs.discovery.initialise` builds it).
 """
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
 """Model selection for articulated models: merge, prune into the parent, re-parent — by held-out loss.
 
-Instead of thresholds, candidate edits of a fitted model are each re-fitted briefly and scored on the
-held-out (``test``) views of every state with a complexity penalty:
+Instead of thresholds, candidate edits of a fitted model are scored on the held-out (``test``) views of
+every state with a complexity penalty:
 
     score = L1_heldout + penalty x K        (K = number of movable bodies; L1 mean per pixel and channel)
 
@@ -18,7 +18,7 @@ the same way; the greedy loop applies the best re-fitted edit while it improves 
 * ``swap(b)``: b's joint type changes (revolute <-> prismatic), parameters from discovery's Kabsch fit
   (``robust_rigid`` + ``revolute_params`` / ``prismatic_params``) on the same centres.
 
-Assumes the canonical frame is the reference state's pose (joint values 0 there), as :mod:`.init` builds.
+Assumes the canonical frame is the reference state's pose (joint values 0 there), as :mod:`pd2gs.discovery.initialise` builds.
 """
 from __future__ import annotations
 

@@ -102,7 +102,7 @@ class DiscoveryConfig:
 
     # --- refinement (paper Sec. 3.4, App. A.1)
     refine: bool = True
-    """SAM-prompted refinement + boundary-aware splitting (False: the ablation without it)."""
+    """mode "paper": SAM-prompted refinement + boundary-aware splitting."""
     tau_vis: float = 2.0
     """ours: winner margin w_p / (max_q w_q + eps)."""
     vis_eps: float = 1e-6
@@ -112,8 +112,8 @@ class DiscoveryConfig:
     n_neg: int = 20
     """paper: negative prompts per part."""
     mask_provider: Literal["grabcut", "sam", "oracle"] = "grabcut"
-    """part masks from "grabcut" (default), "sam" (segment_anything + a local checkpoint) or "oracle" (the
-    dataset's true part masks)."""
+    """mode "paper": part masks from "grabcut" (default), "sam" (segment_anything + a local checkpoint) or
+    "oracle" (the dataset's true part masks)."""
     sam_checkpoint: str | None = None
     """path of a local SAM .pth file (mask_provider="sam")."""
     sam_model_type: str = "vit_b"

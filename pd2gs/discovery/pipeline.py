@@ -183,7 +183,6 @@ def part_meshes(fld: StateField, labels: np.ndarray, obj, sid: str, cfg: Discove
     return out, whole
 
 
-# ----------------------------------------------------------------------------- the pipeline
 # ----------------------------------------------------------------------------- stage 1
 def stage1(field_or_model: Any, obj, cfg: DiscoveryConfig) -> Discovery:
     """The used states of the trained field (``cfg.n_states``; start and end always) -> a Discovery."""
@@ -331,11 +330,16 @@ def articulated_parts(d: Discovery) -> None:
     if d.cfg.select:
         select(d)
     d.fld = posed_field(d.model, d.states)
-    d.labels = d.fld.labels
-    d.joints = {b: jf for b, jf in model_joints(d.model, d.states, d.start, d.end).items()
-                if (d.labels == b).sum() >= 3}
+    labels = d.fld.labels.copy()
+    joints = model_joints(d.model, d.states, d.start, d.end)
+    for b in range(d.model.num_bodies - 1, 0, -1):  # children first: a body too small to mesh joins its parent
+        if (labels == b).sum() < 3:
+            labels[labels == b] = d.model.parent[b]
+            joints.pop(b, None)
+    d.fld.labels = d.labels = labels
+    d.joints = joints
     d.diag["test_l1"] = evaluate_views(d.model, d.frames, "test", fit_config(d, 0).background, d.cfg.render_backend)
-    d.diag["tree"] = {f"p{b}": (f"p{p}" if p else "static") for b, p in enumerate(d.model.parent) if b}
+    d.diag["tree"] = {f"p{b}": (f"p{p}" if p else "static") for b, p in enumerate(d.model.parent) if b in joints}
 
 
 # ----------------------------------------------------------------------------- mode "paper"
@@ -416,7 +420,9 @@ def method_block(cfg: DiscoveryConfig, states_used: int | None = None) -> dict:
                           **({"refine": cfg.refine, "mask_provider": cfg.mask_provider, "cluster": cfg.cluster,
                               "joint_rule": cfg.joint_rule or "paper"} if cfg.mode == "paper" else
                              {"silhouette": cfg.fit_silhouette, "depth": cfg.fit_depth, "select": cfg.select,
-                              "fit_max_side": cfg.fit_max_side})}}
+                              "fit_max_side": cfg.fit_max_side, "fit_iters": cfg.fit_iters,
+                              "select_penalty": cfg.select_penalty, "final_iters": cfg.final_iters,
+                              "joint_rule": cfg.joint_rule or "bic"})}}
 
 
 def dataset_block(data: str) -> dict:
