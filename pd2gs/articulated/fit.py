@@ -58,6 +58,9 @@ class FitConfig:
     # not behind the rendered surface by more than ``reassign_depth_tol`` x the extent (None: no depth test)
     reassign_views: int | None = 64
     reassign_depth_tol: float | None = 0.02
+    # over the second half of the steps every learning rate decays geometrically to this fraction of its
+    # value (single-view Adam steps jitter the joints around their optimum at a constant rate; 1.0 = constant)
+    lr_final: float = 0.1
     # the first this many steps hold the geometry (means, rotations, scales) still, so the joints and
     # ownership, not a deformed canonical shape, have to explain the motion
     joint_warmup: int = 0
@@ -123,6 +126,7 @@ def fit_articulated(model: ArticulatedGaussians, frames: list[Frame], masks: lis
         raise ValueError(f"ref_state: {cfg.ref_state} is not one of the model's {model.num_states} states")
     model.hard = False
     opt = torch.optim.Adam(param_groups(model, cfg), eps=1e-15, fused=True)  # fused: one kernel per step on CPU too
+    base_lrs = [g["lr"] for g in opt.param_groups]
     rng = np.random.default_rng(cfg.seed)
     bg = torch.tensor(cfg.background)
     res = FitResult()
@@ -133,9 +137,10 @@ def fit_articulated(model: ArticulatedGaussians, frames: list[Frame], masks: lis
             order = list(rng.permutation(train))
         i = order.pop()
         model.temperature = temperature_at(cfg, step)
-        geometry_lr_scale = 0.0 if step < cfg.joint_warmup else 1.0
-        for group, lr in zip(opt.param_groups[:3], (cfg.lr_means, cfg.lr_quats, cfg.lr_scales)):
-            group["lr"] = lr * geometry_lr_scale
+        half = cfg.iters // 2
+        decay = cfg.lr_final ** (max(0, step - half) / max(1, cfg.iters - 1 - half))
+        for k, (group, lr) in enumerate(zip(opt.param_groups, base_lrs)):
+            group["lr"] = lr * decay * (0.0 if k < 3 and step < cfg.joint_warmup else 1.0)
         opt.zero_grad(set_to_none=True)
         loss = view_loss(model, frames[i], None if masks is None else masks[i], cfg, bg)
         loss.backward()

@@ -40,12 +40,17 @@ from .model import ArticulatedGaussians
 class SelectConfig:
     """``penalty`` cost of one movable body in held-out mean L1 units; ``refit`` the fit used on the screened
     candidates (its ``iters`` are the short re-fit); ``refit_top`` how many candidates per round are re-fitted
-    after screening (None: all); ``max_rounds`` greedy rounds."""
+    after screening (None: all), screened on ``screen_views`` held-out views per state (None: all of them);
+    ``max_rounds`` greedy rounds; an edit is taken only when it lowers the score by more than ``min_gain``
+    (ties go to the incumbent: a swap or re-parent adds no body, so the penalty cannot stop it, and a short
+    re-fit's noise alone must not change the tree)."""
 
     penalty: float = 1e-3
     refit: FitConfig = field(default_factory=lambda: FitConfig(iters=120))
     max_rounds: int = 6
     refit_top: int | None = 3
+    screen_views: int | None = 2
+    min_gain: float = 5e-4
 
 
 @dataclass
@@ -204,6 +209,12 @@ def select_model(model: ArticulatedGaussians, frames: list[Frame], masks=None, c
     if not any(f.split == "test" for f in frames):
         raise ValueError("frames: model selection needs held-out views (split 'test'); none given")
     ref = cfg.refit.ref_state or 0
+    screen = frames
+    if cfg.screen_views is not None:
+        from .ownership import view_subset
+
+        held = view_subset(frames, "test", cfg.screen_views * len({f.state for f in frames}))
+        screen = [frames[i] for i in held]
     best = copy.deepcopy(model)
     fit_articulated(best, frames, masks, cfg.refit)
     best_score = score(best, frames, cfg)
@@ -211,7 +222,7 @@ def select_model(model: ArticulatedGaussians, frames: list[Frame], masks=None, c
     for _ in range(cfg.max_rounds):
         cands = candidates(best, ref, trajectories)
         if cfg.refit_top is not None and len(cands) > cfg.refit_top:
-            screened = sorted(((score(c, frames, cfg), i) for i, (_, c) in enumerate(cands)))
+            screened = sorted(((score(c, screen, cfg), i) for i, (_, c) in enumerate(cands)))
             for sc, i in screened:
                 sel.log.append({**cands[i][0], "screen": sc})
             cands = [cands[i] for _, i in screened[: cfg.refit_top]]
@@ -223,7 +234,7 @@ def select_model(model: ArticulatedGaussians, frames: list[Frame], masks=None, c
         if not trials:
             break
         s, edit, cand = min(trials, key=lambda t: t[0])
-        if s >= best_score:
+        if s >= best_score - cfg.min_gain:
             break
         best, best_score = cand, s
         sel.log.append({**edit, "chosen": True, "score": s})

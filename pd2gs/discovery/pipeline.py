@@ -30,6 +30,7 @@ import torch
 import pd2gs
 from pd2gs.articulated.fit import FitConfig, evaluate_views, fit_articulated
 from pd2gs.articulated.model import ArticulatedGaussians
+from pd2gs.articulated.search import SearchConfig, search_joints
 from pd2gs.articulated.select import SelectConfig, select_model
 from pd2gs.data import Frame
 from pd2gs.kinematics import JointFit, estimate_joint
@@ -249,6 +250,14 @@ def initialise(d: Discovery) -> None:
                       "sizes": np.bincount(init.labels).tolist()}
 
 
+def search(d: Discovery) -> None:
+    """Each body's joint replaced by the best-rendering coarse hypothesis (:mod:`pd2gs.articulated.search`)."""
+    t0 = time.perf_counter()
+    bg = fit_config(d, 0).background
+    res = search_joints(d.model, d.frames, d.ref_index, SearchConfig(background=bg, backend=d.cfg.render_backend))
+    d.diag["search"] = {"seconds": time.perf_counter() - t0, "bodies": res.chosen}
+
+
 def fit(d: Discovery) -> None:
     """Geometry, ownership and joints fitted together on every training view of every state."""
     res = fit_articulated(d.model, d.frames, d.masks, fit_config(d, d.cfg.fit_iters))
@@ -278,6 +287,7 @@ def posed_field(model: ArticulatedGaussians, states: list[str]) -> StateField:
     posed = [model.pose(k) for k in range(len(states))]
     scales = torch.exp(g.log_scales).double().numpy()
 
+    @torch.no_grad()
     def deform(a: str, b: str, t: float):
         v = (1 - t) * model.values[states.index(a)] + t * model.values[states.index(b)]
         m, q = model.pose(values=v)
@@ -323,9 +333,12 @@ def model_joints(model: ArticulatedGaussians, states: list[str], start: str, end
 
 
 def articulated_parts(d: Discovery) -> None:
-    """Mode "articulated": initialise -> fit -> select -> the posed model's field, labels and joints."""
+    """Mode "articulated": initialise -> coarse joint search -> fit -> select -> the posed model's field, labels
+    and joints."""
     d.frames, d.masks = training_views(d.obj, d.states, d.cfg)
     initialise(d)
+    if d.cfg.search:
+        search(d)
     fit(d)
     if d.cfg.select:
         select(d)
@@ -422,7 +435,7 @@ def method_block(cfg: DiscoveryConfig, states_used: int | None = None) -> dict:
                              {"silhouette": cfg.fit_silhouette, "depth": cfg.fit_depth, "select": cfg.select,
                               "fit_max_side": cfg.fit_max_side, "fit_iters": cfg.fit_iters,
                               "select_penalty": cfg.select_penalty, "final_iters": cfg.final_iters,
-                              "joint_rule": cfg.joint_rule or "bic"})}}
+                              "joint_rule": cfg.joint_rule or "bic", "search": cfg.search})}}
 
 
 def dataset_block(data: str) -> dict:

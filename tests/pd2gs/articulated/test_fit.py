@@ -79,3 +79,32 @@ def test_joint_warmup_holds_the_geometry_still(small):
     assert not torch.equal(model.axes.detach(), axes0)
     fit_articulated(model, frames, masks, FitConfig(iters=4, joint_warmup=2, reassign_every=0))
     assert not torch.equal(model.gaussians.means, means0)
+
+
+def test_the_coarse_search_turns_a_lid_started_as_a_slide_60_degrees_off_into_its_hinge():
+    """A start no gradient fit recovers from: wrong type, axis 60° off, pivot at the centroid."""
+    import math
+
+    import numpy as np
+
+    from pd2gs.articulated.model import ArticulatedGaussians, canonical_gaussians
+    from pd2gs.articulated.scenes import angle_between_deg, line_distance, make_scene, render_scene
+    from pd2gs.articulated.search import SearchConfig, search_joints
+
+    torch.set_num_threads(1)
+    scene = make_scene("lid", n=1500)
+    frames, _ = render_scene(scene, views=8, size=(48, 36))
+    g = canonical_gaussians(scene.means, scene.quats, scene.scales, scene.colors, scene.opacities)
+    a = math.radians(60)
+    wrong_axis = np.array([-math.cos(a), 0.0, math.sin(a)])
+    lid = scene.means[scene.labels == 1].double().mean(0).numpy()
+    model = ArticulatedGaussians(g, [-1, 0], ["prismatic"], wrong_axis[None], lid[None],
+                                 np.linspace(0, 0.05, 4)[:, None], scene.labels)
+    res = search_joints(model, frames, 0, SearchConfig())
+    assert res.chosen[1]["changed"] and res.chosen[1]["loss_after"] < 0.5 * res.chosen[1]["loss_before"]
+    assert model.joint_types == ["revolute"]
+    assert angle_between_deg(model.unit_axes[0].detach(), scene.axes[0]) < 10.0
+    assert line_distance(scene.pivots[0], scene.axes[0], model.pivots[0].detach()) < 0.06
+    # the far value within one grid step (30°) of the truth, with the truth's sign about the found axis
+    sign = float(np.sign(model.unit_axes[0].detach().double().numpy() @ scene.axes[0]))
+    assert abs(sign * float(model.values[3, 0].detach()) - scene.values[3, 0]) <= math.radians(30) + 1e-6
