@@ -195,17 +195,10 @@ RUN_SPLIT = "pd2gs-partnet-run"  # the objects of the latest run, a split of --w
 
 
 def select_split(data: Path, oids: list[str]) -> str:
-    """Record ``oids`` as the split rsart-eval scores (the data root may hold objects of earlier runs, and
-    rsart-eval wants every object of what it scores in the submission); checksums are rewritten with it."""
-    from rsart.format import read_index, write_index
-    from rsart.verify import write_checksums
+    """The objects of this run as the split rsart-eval scores (:func:`common.select_split`)."""
+    from common import select_split as record
 
-    idx = read_index(data / "index.json")
-    if idx.splits.get(RUN_SPLIT) != oids:
-        idx.splits[RUN_SPLIT] = list(oids)
-        write_index(idx, data / "index.json")
-        write_checksums(data)
-    return RUN_SPLIT
+    return record(data, oids, RUN_SPLIT)
 
 
 def score(data: Path, subs: dict[str, Path], work: Path, oids: list[str],

@@ -125,13 +125,17 @@ def run_all(data: Path, ids: list[str], work: Path, iters: int | None, ablations
     return {"submissions": subs, "timing": timing}
 
 
-def score(data: Path, subs: dict[str, Path], work: Path) -> dict[str, dict]:
+def score(data: Path, subs: dict[str, Path], work: Path, ids: list[str]) -> dict[str, dict]:
+    """rsart-eval on each submission, over the objects of this run (recorded as the split ``suite-run``)."""
     from rsart.evaluation.cli import main as eval_main
 
+    from common import select_split
+
+    split = select_split(data, ids, "suite-run")
     out = {}
     for name, sub in subs.items():
         dest = work / "scores" / name
-        if eval_main([str(sub), "--data", str(data), "--out", str(dest), "--overwrite"]):
+        if eval_main([str(sub), "--data", str(data), "--split", split, "--out", str(dest), "--overwrite"]):
             raise SystemExit(f"rsart-eval failed on {sub}")
         out[name] = json.loads((dest / "scores.json").read_text())
     return out
@@ -257,7 +261,7 @@ def main() -> int:
         _say(f"trained {len(ids)} objects in {(time.time() - t0) / 60:.0f} min")
         return 0
     res = run_all(data, ids, args.work, args.iters, abl, args.workers, args.backend, args.address, args.threads)
-    scores = score(data, res["submissions"], args.work)
+    scores = score(data, res["submissions"], args.work, ids)
     md = report(scores, res["timing"], args.work, ids, time.time() - t0)
     from rsart.io import atomic_write_text, write_json
 

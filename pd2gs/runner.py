@@ -198,7 +198,7 @@ def _check_reusable(run: Path, want) -> None:
 
 
 def _train_stage(task: ObjectTask, obj, run: Path, timings: dict) -> None:
-    from .run import train_object
+    from .train import train_object
 
     cfg = dataclasses.replace(task.train, threads=task.threads)
     if (run / "metrics.json").is_file() and (run / "checkpoint.pt").is_file():
@@ -229,7 +229,7 @@ def _discover_stage(task: ObjectTask, obj, run: Path, timings: dict) -> list[str
     """Run every unfinished variant; -> the reasons of the variants that failed."""
     from .discovery.pipeline import discover_safe
     from .discovery.submission import ObjectFailure, object_entry
-    from .run import TrainedModel
+    from .train import TrainedModel
     from .train import load_field
 
     model = None

@@ -174,8 +174,9 @@ class DiscoveryConfig:
     """stage-1 Gaussians less opaque than this are left out of the articulated model."""
     select: bool = True
     """model selection: merge / prune / re-parent / type swap while the penalised held-out loss improves."""
-    select_penalty: float = 1e-3
-    """cost of one movable body in held-out mean-L1 units (pd2gs/articulated/select.py)."""
+    select_penalty_rel: float = 0.02
+    """cost of one movable body as a fraction of the held-out mean L1 of the model entering selection
+    (pd2gs/articulated/select.py)."""
     select_iters: int = 120
     """Adam steps of each candidate's re-fit."""
     select_rounds: int = 6

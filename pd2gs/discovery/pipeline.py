@@ -269,7 +269,8 @@ def select(d: Discovery) -> None:
     """Model selection on the held-out views (merge / prune / re-parent / type swap), then a last fit."""
     t0 = time.perf_counter()
     sel = select_model(d.model, d.frames, d.masks,
-                       SelectConfig(d.cfg.select_penalty, fit_config(d, d.cfg.select_iters), d.cfg.select_rounds),
+                       SelectConfig(penalty_rel=d.cfg.select_penalty_rel, refit=fit_config(d, d.cfg.select_iters),
+                                    max_rounds=d.cfg.select_rounds),
                        d.stage1_means)
     d.model = sel.model
     d.diag["select"] = {"seconds": time.perf_counter() - t0, "score": sel.score, "log": sel.log}
@@ -434,7 +435,7 @@ def method_block(cfg: DiscoveryConfig, states_used: int | None = None) -> dict:
                               "joint_rule": cfg.joint_rule or "paper"} if cfg.mode == "paper" else
                              {"silhouette": cfg.fit_silhouette, "depth": cfg.fit_depth, "select": cfg.select,
                               "fit_max_side": cfg.fit_max_side, "fit_iters": cfg.fit_iters,
-                              "select_penalty": cfg.select_penalty, "final_iters": cfg.final_iters,
+                              "select_penalty_rel": cfg.select_penalty_rel, "final_iters": cfg.final_iters,
                               "joint_rule": cfg.joint_rule or "bic", "search": cfg.search})}}
 
 

@@ -47,22 +47,23 @@ def test_training_views_keep_the_split_scale_the_cameras_and_give_silhouettes(da
     assert with_depth[0].depth is not None and float(with_depth[0].depth.max()) > 0
 
 
-def coloured(fld, obj, state="m0"):
-    """The perfect field with each Gaussian's colour read from the captured views of ``state`` where it is
-    visible (its depth matches the view's depth within 1 cm; median over views), as stage 1 learns it."""
-    k = fld.index(state)
-    x = fld.means[k]
-    samples = [[] for _ in range(len(x))]
-    for v in obj.states[state].views:
-        cam = v.camera
-        xc = x @ cam.w2c[:3, :3].T + cam.w2c[:3, 3]
-        uv = xc[:, :2] / xc[:, 2:3] @ cam.K[:2, :2].T + cam.K[:2, 2]
-        u, w = np.round(uv[:, 0]).astype(int), np.round(uv[:, 1]).astype(int)
-        ok = (xc[:, 2] > 0) & (u >= 0) & (u < cam.width) & (w >= 0) & (w < cam.height)
-        depth, rgb = v.depth, v.rgb
-        for i in np.flatnonzero(ok):
-            if abs(depth[w[i], u[i]] - xc[i, 2]) < 0.01:
-                samples[i].append(rgb[w[i], u[i]] / 255.0)
+def coloured(fld, obj):
+    """The perfect field with each Gaussian's colour read from the captured views of every state where it is
+    visible there (its depth matches the view's depth within 1 cm; median over views), as stage 1, trained
+    on every state, learns it."""
+    samples = [[] for _ in range(fld.n)]
+    for k, state in enumerate(fld.state_ids):
+        x = fld.means[k]
+        for v in obj.states[state].views:
+            cam = v.camera
+            xc = x @ cam.w2c[:3, :3].T + cam.w2c[:3, 3]
+            uv = xc[:, :2] / xc[:, 2:3] @ cam.K[:2, :2].T + cam.K[:2, 2]
+            u, w = np.round(uv[:, 0]).astype(int), np.round(uv[:, 1]).astype(int)
+            ok = (xc[:, 2] > 0) & (u >= 0) & (u < cam.width) & (w >= 0) & (w < cam.height)
+            depth, rgb = v.depth, v.rgb
+            for i in np.flatnonzero(ok):
+                if abs(depth[w[i], u[i]] - xc[i, 2]) < 0.01:
+                    samples[i].append(rgb[w[i], u[i]] / 255.0)
     fld.colors = np.array([np.median(c, axis=0) if c else fld.colors[i] for i, c in enumerate(samples)])
     return fld
 
