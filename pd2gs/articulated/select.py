@@ -3,9 +3,11 @@
 Instead of thresholds, candidate edits of a fitted model are scored on the held-out (``test``) views of
 every state with a complexity penalty:
 
-    score = L1_heldout + penalty x K        (K = number of movable bodies; L1 mean per pixel and channel)
+    score = L1_heldout + penalty x C        (L1 mean per pixel and channel; C = :func:`complexity`: 1 per
+                                             movable body, 2 for a revolute one)
 
-so an extra body must lower the held-out colour error by more than ``penalty`` to stay. The penalty is
+so an extra body must lower the held-out colour error by more than ``penalty`` (twice that for a hinge)
+to stay, and a hinge must render better than a slide by ``penalty`` to stay a hinge. The penalty is
 relative by default: ``penalty_rel`` (2 %) of the incumbent's held-out L1 after its first re-fit (at least
 ``penalty_min``, 1e-4), so it
 scales with what the images leave unexplained rather than with the image size (an absolute 1e-3, a quarter
@@ -207,10 +209,17 @@ def candidates(model: ArticulatedGaussians, ref: int = 0, trajectories: np.ndarr
     return out
 
 
+def complexity(model: ArticulatedGaussians) -> int:
+    """Penalty units of a model: 1 per movable body, 1 more per revolute joint (its pivot adds two free
+    parameters to the two of an axis direction, which both types share), so a revolute joint that renders no
+    better than a slide (a hinge far away imitates one) loses to it."""
+    return sum(2 if t == "revolute" else 1 for t in model.joint_types)
+
+
 def score(model: ArticulatedGaussians, frames: list[Frame], cfg: SelectConfig) -> float:
-    """Penalised held-out loss of a (fitted) model."""
+    """Penalised held-out loss of a (fitted) model: held-out L1 + penalty x :func:`complexity`."""
     f = cfg.refit
-    return evaluate_views(model, frames, "test", f.background, f.backend) + cfg.penalty * (model.num_bodies - 1)
+    return evaluate_views(model, frames, "test", f.background, f.backend) + cfg.penalty * complexity(model)
 
 
 def select_model(model: ArticulatedGaussians, frames: list[Frame], masks=None, cfg: SelectConfig | None = None,
