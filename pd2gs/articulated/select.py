@@ -192,9 +192,14 @@ def candidates(model: ArticulatedGaussians, ref: int = 0, trajectories: np.ndarr
                 owner[b] = a
                 out.append(({"edit": "merge", "body": b, "into": a}, rebuild(model, owner, parent)))
         swapped = "prismatic" if model.joint_types[b - 1] == "revolute" else "revolute"
-        out.append(({"edit": "swap", "body": b, "type": swapped},
-                    rebuild(model, ident, parent,
-                            {b: relative_joint(model, b, parent[b], ref, trajectories, swapped)})))
+        # the new joint read off stage 1's trajectories, and off the body's motion as the model poses it (a
+        # fitted far hinge already moves the body as the images show; a fitted slide holds no rotation to
+        # read a hinge from, so that one is offered only from revolute to prismatic)
+        sources = [("trajectories", trajectories)] + ([("posed", None)] if swapped == "prismatic"
+                                                      and trajectories is not None else [])
+        for src, traj in sources:
+            out.append(({"edit": "swap", "body": b, "type": swapped, "from": src},
+                        rebuild(model, ident, parent, {b: relative_joint(model, b, parent[b], ref, traj, swapped)})))
         for p in range(1, n):
             descendants = {b}
             for c in range(1, n):  # parents precede children, one pass suffices

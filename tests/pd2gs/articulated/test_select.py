@@ -58,7 +58,8 @@ def test_rebuild_reparents_and_merges_without_changing_the_truths_poses():
     assert torch.allclose(w_merged[:, 1], w_flat[:, 1] + w_flat[:, 2], atol=1e-6)
     # edits offered: prune each leaf, merge the siblings once, re-parent each under the other
     edits = sorted(e["edit"] for e, _ in candidates(flat, trajectories=trajectories(scene)))
-    assert edits == ["merge", "prune", "prune", "reparent", "reparent", "swap", "swap"]
+    # swaps to prismatic come twice: read off stage 1's trajectories and off the model's own posed motion
+    assert edits == ["merge", "prune", "prune", "reparent", "reparent", "swap", "swap", "swap", "swap"]
 
 
 @pytest.fixture(scope="module")
@@ -121,3 +122,32 @@ def test_selection_swaps_a_lid_started_as_a_drawer_to_revolute():
     assert sel.model.joint_types == ["revolute"], sel.log
     d = sel.model.unit_axes[0].detach().numpy()
     assert abs(float(d @ scene.axes[0])) > np.cos(np.radians(1.0))
+
+
+def test_selection_turns_a_far_hinge_imitating_the_trays_slide_into_a_slide():
+    """A hinge 3 m away moves the tray almost as its slide does; it renders no better, costs more, and the
+    slide read off the model's own posed motion replaces it."""
+    torch.set_num_threads(1)
+    scene = make_scene("tray", n=1200)
+    frames, masks = render_scene(scene, views=8, size=(48, 36))
+    R = 3.0
+    slide = scene.axes[0]                                  # -y
+    hinge_axis = np.array([-1.0, 0.0, 0.0])                # perpendicular to the slide
+    pivot = scene.pivots[0] + R * np.array([0.0, 0.0, 1.0])  # far above: the tray swings along -y
+    angles = np.arcsin(scene.values[:, 0] / R)             # so the tray's centre moves by the slide's values
+    g = gaussians_of(scene)
+    model = ArticulatedGaussians(g, [-1, 0], ["revolute"], hinge_axis[None], pivot[None], angles[:, None],
+                                 scene.labels)
+    # sign: rotating about -x by a positive angle moves a point below the pivot towards -y
+    assert torch.allclose(model.pose(3)[0][scene.labels == 1].mean(0)[1],
+                          scene.posed_means(3)[scene.labels == 1].mean(0)[1], atol=0.02)
+    # stage 1 moved the tray only halfway (a field that moves part of a part): the slide read off those
+    # trajectories is half the truth; the one read off the model's own posed motion is right
+    traj = trajectories(scene)
+    tray = (scene.labels == 1).numpy()
+    traj[:, tray] = traj[0, tray] + 0.5 * (traj[:, tray] - traj[0, tray])
+    sel = select_model(model, frames, masks, SelectConfig(refit=FitConfig(iters=80)), traj)
+    assert sel.model.joint_types == ["prismatic"], sel.log
+    chosen = [e for e in sel.log if e.get("chosen")]
+    assert chosen and chosen[0]["edit"] == "swap" and chosen[0]["from"] == "posed", sel.log
+    assert abs(float(sel.model.unit_axes[0].detach() @ torch.as_tensor(slide, dtype=torch.float32))) > 0.99
