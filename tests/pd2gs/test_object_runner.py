@@ -175,23 +175,18 @@ def test_killed_process_worker_is_retried_and_the_submission_is_the_same(data, r
 @pytest.mark.slow
 def test_interrupted_run_resumes_to_the_same_submission(data, reference, tmp_path):
     out = tmp_path / "interrupted"
+    # a test run started in the background by a non-interactive shell inherits SIGINT ignored, and so would
+    # the run under test: Ctrl-C must reach it as at a terminal
     proc = subprocess.Popen(_cmd(data, out, "--backend", "process", "--workers", "1"), stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, env=_env())
+                            stderr=subprocess.PIPE, text=True, env=_env(),
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         t0 = time.time()
         while not list(out.glob("runs/*/metrics.json")):  # the first object's training stage is finished
             assert proc.poll() is None and time.time() - t0 < 600
             time.sleep(0.2)
-        # Ctrl-C, pressed again every 5 s until the run stops: one fresh-clone CI run (2026-11-26) saw a single
-        # SIGINT sent right after the first training ended have no effect (the run finished with exit 0);
-        # not yet explained, see the closing note of issue 21's session
-        for _ in range(24):
-            proc.send_signal(signal.SIGINT)
-            try:
-                _, stderr = proc.communicate(timeout=5)
-                break
-            except subprocess.TimeoutExpired:
-                continue
+        proc.send_signal(signal.SIGINT)  # Ctrl-C
+        _, stderr = proc.communicate(timeout=120)
     finally:
         if proc.poll() is None:
             proc.kill()
