@@ -26,6 +26,7 @@ import torch
 from pd2gs.data import Frame
 
 from .model import ArticulatedGaussians
+from .ownership import view_subset
 
 
 @dataclass
@@ -49,15 +50,6 @@ class SearchResult:
     """Per body: the chosen hypothesis and the current joint's and the chosen one's losses."""
 
     chosen: dict[int, dict] = field(default_factory=dict)
-
-
-def _views(frames: list[Frame], per_state: int) -> list[Frame]:
-    out = []
-    for s in sorted({f.state for f in frames if f.split == "train"}):
-        own = [f for f in frames if f.split == "train" and f.state == s]
-        idx = np.unique(np.linspace(0, len(own) - 1, min(per_state, len(own))).round().astype(int))
-        out += [own[i] for i in idx]
-    return out
 
 
 def _ramp(num_states: int, ref: int) -> np.ndarray:
@@ -121,7 +113,8 @@ def search_joints(model: ArticulatedGaussians, frames: list[Frame], ref: int = 0
                   cfg: SearchConfig | None = None) -> SearchResult:
     """Replace each movable body's joint (in place, bodies in order) by the best-rendering hypothesis."""
     cfg = cfg or SearchConfig()
-    views = _views(frames, cfg.views_per_state)
+    n_states = len({f.state for f in frames if f.split == "train"})
+    views = [frames[i] for i in view_subset(frames, "train", cfg.views_per_state * max(1, n_states))]
     if not views:
         raise ValueError("frames: the joint search needs training views (split 'train')")
     ramp = np.asarray(cfg.ramp, dtype=np.float64) if cfg.ramp is not None else _ramp(model.num_states, ref)

@@ -42,6 +42,7 @@ from pd2gs.kinematics import estimate_joint, prismatic_params, revolute_params, 
 
 from .fit import FitConfig, evaluate_views, fit_articulated
 from .model import ArticulatedGaussians
+from .ownership import view_subset
 
 
 @dataclass
@@ -238,8 +239,6 @@ def select_model(model: ArticulatedGaussians, frames: list[Frame], masks=None, c
     ref = cfg.refit.ref_state or 0
     screen = frames
     if cfg.screen_views is not None:
-        from .ownership import view_subset
-
         held = view_subset(frames, "test", cfg.screen_views * len({f.state for f in frames}))
         screen = [frames[i] for i in held]
     best = copy.deepcopy(model)
