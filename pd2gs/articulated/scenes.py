@@ -4,6 +4,9 @@
   lid opens by -angle about it, i.e. +angle about -x).
 * ``flap``: the same lid carrying a flap hinged on its front edge (a chain: base -> lid -> flap).
 * ``static``: the box and lid glued together (no movable body).
+* ``twin``: the lid cut in two halves side by side (x < 0: body 1, x > 0: body 2) on the same hinge line,
+  the second opening by ``twin_deg`` instead of ``angles_deg``: two coaxial hinges, so hanging one half on
+  the other renders exactly as the flat tree does (woven baskets and double doors share a hinge line).
 * ``tray``: the glued box holding a tray that is hidden inside it in the first state and slides out of its
   front face (-y) by ``tray_m`` metres (one prismatic body; the first state shows none of the tray).
 
@@ -24,7 +27,7 @@ from pd2gs.render import rasterize
 from pd2gs.synthetic import _surface_points, ring_cameras, scene_gaussians
 from rsart.kinematics import joint_motion
 
-SCENES = ("lid", "flap", "static", "tray")
+SCENES = ("lid", "flap", "static", "tray", "twin")
 
 
 @dataclass
@@ -65,9 +68,11 @@ class ArticulatedScene:
 
 
 def make_scene(name: str = "lid", n: int = 3000, angles_deg=(0.0, 20.0, 40.0, 60.0),
-               flap_deg=(0.0, 30.0, 10.0, 50.0), seed: int = 0, tray_m=(0.0, 0.12, 0.24, 0.36)) -> ArticulatedScene:
+               flap_deg=(0.0, 30.0, 10.0, 50.0), seed: int = 0, tray_m=(0.0, 0.12, 0.24, 0.36),
+               twin_deg=(0.0, 10.0, 30.0, 45.0)) -> ArticulatedScene:
     """One of :data:`SCENES` with ``len(angles_deg)`` states (lid opening angles; ``flap_deg`` the flap's
-    angles relative to the lid, ``flap`` only; ``tray_m`` the tray's slide, ``tray`` only)."""
+    angles relative to the lid, ``flap`` only; ``tray_m`` the tray's slide, ``tray`` only; ``twin_deg`` the
+    second half lid's angles, ``twin`` only)."""
     if name not in SCENES:
         raise ValueError(f"unknown scene {name!r}; choose one of {', '.join(SCENES)}")
     means, quats, scales, colors, opac, labels = scene_gaussians(n, seed)
@@ -79,6 +84,12 @@ def make_scene(name: str = "lid", n: int = 3000, angles_deg=(0.0, 20.0, 40.0, 60
     if name == "lid":
         return ArticulatedScene(means, quats, scales, colors, opac, labels, [-1, 0], ["revolute"],
                                 lid_axis[None], lid_pivot[None], lid_vals[:, None])
+    if name == "twin":
+        labels = torch.where((labels == 1) & (means[:, 0] > 0), 2, labels)
+        twin_vals = np.radians(np.asarray(twin_deg, dtype=np.float64))[: len(angles_deg)]
+        return ArticulatedScene(means, quats, scales, colors, opac, labels, [-1, 0, 0], ["revolute"] * 2,
+                                np.stack([lid_axis, lid_axis]), np.stack([lid_pivot, lid_pivot]),
+                                np.stack([lid_vals, twin_vals], axis=1))
     if name == "tray":
         g = torch.Generator().manual_seed(seed + 2)
         nt = n // 4

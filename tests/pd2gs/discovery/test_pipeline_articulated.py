@@ -120,6 +120,10 @@ def test_articulated_discovery_end_to_end_scores(data, tmp_path):
     accurate = (m["type_acc"] == 1.0 and set(d["tree"].values()) == {"static"} and m["axis_ang"] < 1.0
                 and m["axis_pos"] < 0.1 and m["part_motion_rev"] < 2.0 and m["part_motion_pri"] < 0.01)
     if not accurate:  # a known failure, kept visible (docs/pd2gs-parts.md, "Known limits")
-        pytest.xfail(f"issue 21: on this 64-px fixture the fit moves the door's joint away from a 0.8° Kabsch start "
-                     f"(measured 24-31°): tree {d['tree']}, type acc {m['type_acc']:.2f}, Axis Ang {m['axis_ang']:.1f}°, "
-                     f"Part Motion {m['part_motion_rev']:.1f}°")
+        # measured: with ownership held at the (near-perfect) init, the fit still turns the door 20-32° away
+        # from a 0.3° start at 64 and at 128 px, and a 4-views-per-step fit ends 57° off with a lower train
+        # and held-out L1 than the true joints held fixed: the fixture's views (the door covers a few dozen
+        # pixels) do not pin the door's axis once the geometry may adapt
+        pytest.xfail(f"issue 21: on this small fixture the views do not pin the door's axis (a fit 57° off renders "
+                     f"the views better than the truth): tree {d['tree']}, type acc {m['type_acc']:.2f}, "
+                     f"Axis Ang {m['axis_ang']:.1f}°, Part Motion {m['part_motion_rev']:.1f}°")
