@@ -251,10 +251,11 @@ def initialise(d: Discovery) -> None:
 
 
 def search(d: Discovery) -> None:
-    """Each body's joint replaced by the best-rendering coarse hypothesis (:mod:`pd2gs.articulated.search`)."""
+    """Each body's joint replaced by the best-rendering coarse hypothesis where it also renders the held-out
+    views better (:mod:`pd2gs.articulated.search`)."""
     t0 = time.perf_counter()
-    bg = fit_config(d, 0).background
-    res = search_joints(d.model, d.frames, d.ref_index, SearchConfig(background=bg, backend=d.cfg.render_backend))
+    res = search_joints(d.model, d.frames, d.ref_index,
+                        SearchConfig(background=fit_config(d, 0).background, backend=d.cfg.render_backend))
     d.diag["search"] = {"seconds": time.perf_counter() - t0, "bodies": res.chosen}
 
 
@@ -334,8 +335,8 @@ def model_joints(model: ArticulatedGaussians, states: list[str], start: str, end
 
 
 def articulated_parts(d: Discovery) -> None:
-    """Mode "articulated": initialise -> coarse joint search -> fit -> select -> the posed model's field, labels
-    and joints."""
+    """Mode "articulated": initialise -> coarse joint search (``search``) -> fit -> select -> the posed model's
+    field, labels and joints."""
     d.frames, d.masks = training_views(d.obj, d.states, d.cfg)
     initialise(d)
     if d.cfg.search:

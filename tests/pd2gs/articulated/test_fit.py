@@ -108,3 +108,36 @@ def test_the_coarse_search_turns_a_lid_started_as_a_slide_60_degrees_off_into_it
     # the far value within one grid step (30°) of the truth, with the truth's sign about the found axis
     sign = float(np.sign(model.unit_axes[0].detach().double().numpy() @ scene.axes[0]))
     assert abs(sign * float(model.values[3, 0].detach()) - scene.values[3, 0]) <= math.radians(30) + 1e-6
+
+
+def test_the_coarse_search_keeps_the_current_joint_when_the_held_out_views_do_not_confirm_the_new_one():
+    import math
+
+    import numpy as np
+
+    from pd2gs.articulated.model import ArticulatedGaussians, canonical_gaussians
+    from pd2gs.articulated.scenes import make_scene, render_scene
+    from pd2gs.articulated.search import SearchConfig, search_joints
+
+    torch.set_num_threads(1)
+    scene = make_scene("lid", n=800)
+    frames, _ = render_scene(scene, views=8, size=(40, 30))
+    g = canonical_gaussians(scene.means, scene.quats, scene.scales, scene.colors, scene.opacities)
+    a = math.radians(60)
+    wrong = np.array([[-math.cos(a), 0.0, math.sin(a)]])
+    lid = scene.means[scene.labels == 1].double().mean(0).numpy()[None]
+
+    def model():
+        return ArticulatedGaussians(g, [-1, 0], ["prismatic"], wrong, lid, np.linspace(0, 0.05, 4)[:, None],
+                                    scene.labels)
+
+    # the hinge found on the training views renders the held-out ones far better: taken
+    m = model()
+    res = search_joints(m, frames, 0, SearchConfig())
+    c = res.chosen[1]
+    assert c["changed"] and c["held_out_after"] < 0.5 * c["held_out_before"] and m.joint_types == ["revolute"]
+    # a gain no hypothesis can reach (the whole held-out error): the slide stays, untouched
+    m = model()
+    res = search_joints(m, frames, 0, SearchConfig(min_gain_rel=1.0))
+    assert not res.chosen[1]["changed"] and m.joint_types == ["prismatic"]
+    assert np.allclose(m.unit_axes[0].detach().numpy(), wrong[0], atol=1e-6)
