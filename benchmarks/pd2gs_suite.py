@@ -46,6 +46,7 @@ ABLATIONS = {  # name -> DiscoveryConfig overrides (same trained field)
     "no-select": {"select": False},  # the initial count, tree and types
     "search": {"search": True},  # + the coarse rendered joint search before the fit
     "depth": {"fit_depth": 1.0},  # + an L1 depth loss (its own track: the submission's inputs name depth)
+    "fit-120": {"fit_max_side": 120},  # the articulated fit's views at 120 px instead of 80
 }
 
 
