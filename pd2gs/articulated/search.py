@@ -113,34 +113,6 @@ def _set_joint(model: ArticulatedGaussians, j: int, t: str, axis, pivot, values)
     model.values.data[:, j] = torch.as_tensor(np.asarray(values), dtype=model.values.dtype)
 
 
-def search_views(frames: list[Frame], cfg: SearchConfig) -> list[Frame]:
-    """The training views the search renders: ``cfg.views_per_state`` per state, evenly spread."""
-    n_states = len({f.state for f in frames if f.split == "train"})
-    views = [frames[i] for i in view_subset(frames, "train", cfg.views_per_state * max(1, n_states))]
-    if not views:
-        raise ValueError("frames: the joint search needs training views (split 'train')")
-    return views
-
-
-@torch.no_grad()
-def best_hypothesis(model: ArticulatedGaussians, b: int, views: list[Frame], ramp: np.ndarray, cfg: SearchConfig
-                    ) -> tuple[tuple[str, np.ndarray, np.ndarray, np.ndarray] | None, float, float]:
-    """Body b's best-rendering joint hypothesis, the others held -> (hypothesis or None when none renders
-    better than the current joint, the current loss, the best loss). ``model`` is hard and left unchanged."""
-    j = b - 1
-    bg = torch.tensor(cfg.background)
-    current = (model.joint_types[j], model.axes[j].clone(), model.pivots[j].clone(), model.values[:, j].clone())
-    best_loss = start_loss = _loss(model, views, bg, cfg.backend)
-    best = None
-    for t, a, p, v in hypotheses(model, b, ramp, cfg):
-        _set_joint(model, j, t, a, p, v)
-        loss = _loss(model, views, bg, cfg.backend)
-        if loss < best_loss:
-            best_loss, best = loss, (t, a, p, v)
-    _set_joint(model, j, *current)
-    return best, start_loss, best_loss
-
-
 @torch.no_grad()
 def search_joints(model: ArticulatedGaussians, frames: list[Frame], ref: int = 0,
                   cfg: SearchConfig | None = None) -> SearchResult:
@@ -148,8 +120,10 @@ def search_joints(model: ArticulatedGaussians, frames: list[Frame], ref: int = 0
     training views, where it also renders the held-out views better (see :class:`SearchConfig`; without
     held-out views the training views' choice stands)."""
     cfg = cfg or SearchConfig()
-    views = search_views(frames, cfg)
     n_states = len({f.state for f in frames})
+    views = [frames[i] for i in view_subset(frames, "train", cfg.views_per_state * n_states)]
+    if not views:
+        raise ValueError("frames: the joint search needs training views (split 'train')")
     check = [frames[i] for i in view_subset(frames, "test", cfg.check_views * n_states)]
     ramp = np.asarray(cfg.ramp, dtype=np.float64) if cfg.ramp is not None else _ramp(model.num_states, ref)
     bg = torch.tensor(cfg.background)
@@ -158,19 +132,25 @@ def search_joints(model: ArticulatedGaussians, frames: list[Frame], ref: int = 0
     res = SearchResult()
     for b in range(1, model.num_bodies):
         j = b - 1
-        best, start_loss, best_loss = best_hypothesis(model, b, views, ramp, cfg)
+        current = (model.joint_types[j], model.axes[j].clone(), model.pivots[j].clone(), model.values[:, j].clone())
+        best_loss = start_loss = _loss(model, views, bg, cfg.backend)
+        best = None
+        for t, a, p, v in hypotheses(model, b, ramp, cfg):
+            _set_joint(model, j, t, a, p, v)
+            loss = _loss(model, views, bg, cfg.backend)
+            if loss < best_loss:
+                best_loss, best = loss, (t, a, p, v)
         info = {"loss_before": start_loss, "loss_after": best_loss}
         if best is not None and check:
-            current = (model.joint_types[j], model.axes[j].clone(), model.pivots[j].clone(), model.values[:, j].clone())
+            _set_joint(model, j, *current)
             held_before = _loss(model, check, bg, cfg.backend)
             _set_joint(model, j, *best)
             held_after = _loss(model, check, bg, cfg.backend)
-            _set_joint(model, j, *current)
             info.update(held_out_before=held_before, held_out_after=held_after)
             if held_after >= held_before * (1.0 - cfg.min_gain_rel):
                 best = None
+        _set_joint(model, j, *(best if best is not None else current))
         if best is not None:
-            _set_joint(model, j, *best)
             _set_joint(full, j, *best)
         res.chosen[b] = {"type": model.joint_types[j], **info, "changed": best is not None}
     return res

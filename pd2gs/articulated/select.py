@@ -258,6 +258,8 @@ def select_model(model: ArticulatedGaussians, frames: list[Frame], masks=None, c
             for sc, i in screened:
                 sel.log.append({**cands[i][0], "screen": sc})
             cands = [cands[i] for _, i in screened[: cfg.refit_top]]
+        if not cands:
+            break
         # the incumbent gets the same re-fit as the candidates, so an edit wins by its structure and not by
         # the extra steps (measured: re-parenting one of two coaxial lids, a model that renders identically,
         # gained 6 % of the held-out L1 from its re-fit alone and doubled that lid's reported motion)
@@ -277,8 +279,6 @@ def select_model(model: ArticulatedGaussians, frames: list[Frame], masks=None, c
             # the candidate is the better of the two
             trials.append((s, edit, fitted) if s <= built else (built, edit, cand))
             sel.log.append({**edit, "score": trials[-1][0], "built": built})
-        if not trials:
-            break
         s, edit, cand = min(trials, key=lambda t: t[0])
         if s >= best_score - cfg.min_gain:
             break

@@ -81,25 +81,34 @@ def test_joint_warmup_holds_the_geometry_still(small):
     assert not torch.equal(model.gaussians.means, means0)
 
 
+WRONG_AXIS = (-0.5, 0.0, 0.8660254037844386)  # the lid's hinge axis (-x) turned 60° towards +z
+
+
+def lid_started_as_a_slide_60_degrees_off(scene):
+    """The lid scene's model with a start no gradient fit recovers from: wrong type, axis 60° off, pivot at
+    the lid's centroid, a small slide."""
+    import numpy as np
+
+    from pd2gs.articulated.model import ArticulatedGaussians, canonical_gaussians
+
+    g = canonical_gaussians(scene.means, scene.quats, scene.scales, scene.colors, scene.opacities)
+    lid = scene.means[scene.labels == 1].double().mean(0).numpy()
+    return ArticulatedGaussians(g, [-1, 0], ["prismatic"], np.array([WRONG_AXIS]), lid[None],
+                                np.linspace(0, 0.05, 4)[:, None], scene.labels)
+
+
 def test_the_coarse_search_turns_a_lid_started_as_a_slide_60_degrees_off_into_its_hinge():
-    """A start no gradient fit recovers from: wrong type, axis 60° off, pivot at the centroid."""
     import math
 
     import numpy as np
 
-    from pd2gs.articulated.model import ArticulatedGaussians, canonical_gaussians
-    from pd2gs.articulated.scenes import angle_between_deg, line_distance, make_scene, render_scene
+    from pd2gs.articulated.scenes import angle_between_deg, line_distance
     from pd2gs.articulated.search import SearchConfig, search_joints
 
     torch.set_num_threads(1)
     scene = make_scene("lid", n=1500)
     frames, _ = render_scene(scene, views=8, size=(48, 36))
-    g = canonical_gaussians(scene.means, scene.quats, scene.scales, scene.colors, scene.opacities)
-    a = math.radians(60)
-    wrong_axis = np.array([-math.cos(a), 0.0, math.sin(a)])
-    lid = scene.means[scene.labels == 1].double().mean(0).numpy()
-    model = ArticulatedGaussians(g, [-1, 0], ["prismatic"], wrong_axis[None], lid[None],
-                                 np.linspace(0, 0.05, 4)[:, None], scene.labels)
+    model = lid_started_as_a_slide_60_degrees_off(scene)
     res = search_joints(model, frames, 0, SearchConfig())
     assert res.chosen[1]["changed"] and res.chosen[1]["loss_after"] < 0.5 * res.chosen[1]["loss_before"]
     assert model.joint_types == ["revolute"]
@@ -111,33 +120,20 @@ def test_the_coarse_search_turns_a_lid_started_as_a_slide_60_degrees_off_into_it
 
 
 def test_the_coarse_search_keeps_the_current_joint_when_the_held_out_views_do_not_confirm_the_new_one():
-    import math
-
     import numpy as np
 
-    from pd2gs.articulated.model import ArticulatedGaussians, canonical_gaussians
-    from pd2gs.articulated.scenes import make_scene, render_scene
     from pd2gs.articulated.search import SearchConfig, search_joints
 
     torch.set_num_threads(1)
     scene = make_scene("lid", n=800)
     frames, _ = render_scene(scene, views=8, size=(40, 30))
-    g = canonical_gaussians(scene.means, scene.quats, scene.scales, scene.colors, scene.opacities)
-    a = math.radians(60)
-    wrong = np.array([[-math.cos(a), 0.0, math.sin(a)]])
-    lid = scene.means[scene.labels == 1].double().mean(0).numpy()[None]
-
-    def model():
-        return ArticulatedGaussians(g, [-1, 0], ["prismatic"], wrong, lid, np.linspace(0, 0.05, 4)[:, None],
-                                    scene.labels)
-
     # the hinge found on the training views renders the held-out ones far better: taken
-    m = model()
+    m = lid_started_as_a_slide_60_degrees_off(scene)
     res = search_joints(m, frames, 0, SearchConfig())
     c = res.chosen[1]
     assert c["changed"] and c["held_out_after"] < 0.5 * c["held_out_before"] and m.joint_types == ["revolute"]
     # a gain no hypothesis can reach (the whole held-out error): the slide stays, untouched
-    m = model()
+    m = lid_started_as_a_slide_60_degrees_off(scene)
     res = search_joints(m, frames, 0, SearchConfig(min_gain_rel=1.0))
     assert not res.chosen[1]["changed"] and m.joint_types == ["prismatic"]
-    assert np.allclose(m.unit_axes[0].detach().numpy(), wrong[0], atol=1e-6)
+    assert np.allclose(m.unit_axes[0].detach().numpy(), WRONG_AXIS, atol=1e-6)

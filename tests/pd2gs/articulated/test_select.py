@@ -172,4 +172,3 @@ def test_selection_keeps_the_flat_tree_of_two_coaxial_half_lids(cfg):
     keeps = [e for e in sel.log if e["edit"] == "keep"]
     assert keeps and keeps[-1]["score"] <= sel.log[0]["score"]  # the incumbent itself re-fitted
     assert sel.score == pytest.approx(keeps[-1]["score"])
-
