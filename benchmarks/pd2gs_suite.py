@@ -44,7 +44,7 @@ ABLATIONS = {  # name -> DiscoveryConfig overrides (same trained field)
     "2-states": {"n_states": 2},  # start and end states only
     "given-count": {"counter": "given"},  # the true part count (meta.json)
     "no-select": {"select": False},  # the initial count, tree and types
-    "search": {"search": True},  # + the coarse rendered joint search before the fit
+    "search": {"search": True},  # + the coarse joint and ownership search before the fit
     "depth": {"fit_depth": 1.0},  # + an L1 depth loss (its own track: the submission's inputs name depth)
     "fit-120": {"fit_max_side": 120},  # the articulated fit's views at 120 px instead of 80
 }

@@ -21,7 +21,7 @@ Ablation switches (docs/pd2gs-parts.md has the table):
 * ``fit_silhouette``  — articulated: weight of the object-silhouette loss (0 = RGB only).
 * ``fit_depth``       — articulated: weight of a depth loss (0, the default: PD²GS is RGB-only).
 * ``select``          — articulated: False keeps the initial part count, tree and types.
-* ``search``          — articulated: a coarse rendered joint search, checked on held-out views, before the fit.
+* ``search``          — articulated: a coarse joint and ownership search, checked on held-out views, before the fit.
 * ``refine``, ``mask_provider``, ``cluster``, ``split_disconnected`` — paper mode's segmentation.
 * ``joint_rule``      — the Kabsch joints' type rule, "paper" or "bic" (None: the mode's own: "paper" in mode
   "paper", "bic" for the articulated initialisation).
@@ -159,9 +159,10 @@ class DiscoveryConfig:
 
     # --- the articulated model (mode "articulated"; pd2gs/articulated/)
     search: bool = False
-    """coarse joint search before the fit: each body's joint replaced by the best-rendering hypothesis (axes,
-    hinge pivots, both types, a grid of values; pd2gs/articulated/search.py) where that one also renders the
-    held-out views better by more than 2 %."""
+    """coarse joint search before the fit (pd2gs/articulated/search.py): each body's joint chosen among
+    thousands of hypotheses (axes over the half sphere, hinge pivots on a grid, both types, a grid of
+    values) by how well its posed Gaussians agree with the training views' silhouettes and colours, and the
+    Gaussians re-assigned to the pose that suits them; kept where the held-out views agree too."""
     fit_iters: int = 600
     """Adam steps of the articulated fit (one random training view per step)."""
     fit_max_side: int = 80

@@ -251,12 +251,12 @@ def initialise(d: Discovery) -> None:
 
 
 def search(d: Discovery) -> None:
-    """Each body's joint replaced by the best-rendering coarse hypothesis where it also renders the held-out
-    views better (:mod:`pd2gs.articulated.search`)."""
+    """Each body's joint and the Gaussians it owns chosen by how well the posed Gaussians agree with the
+    training views, kept where the held-out views agree too (:mod:`pd2gs.articulated.search`)."""
     t0 = time.perf_counter()
-    res = search_joints(d.model, d.frames, d.ref_index,
-                        SearchConfig(background=fit_config(d, 0).background, backend=d.cfg.render_backend))
-    d.diag["search"] = {"seconds": time.perf_counter() - t0, "bodies": res.chosen}
+    res = search_joints(d.model, d.frames, d.masks, d.ref_index, SearchConfig())
+    d.diag["search"] = {"seconds": time.perf_counter() - t0, "bodies": res.chosen, "moved": res.moved,
+                        "held_out": res.held_out, "kept": res.kept}
 
 
 def fit(d: Discovery) -> None:
