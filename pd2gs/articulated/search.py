@@ -36,9 +36,12 @@ least ``min_explained`` of the cost its Gaussians have when not moving: where a 
 stays inside the object's silhouette and matches the colours behind it (a white refrigerator's door), no
 hypothesis is much better than not moving, and the search leaves the joint alone.
 
-**Ownership.** After each body's search (bodies largest first), each Gaussian goes to the pose (base or
-a body's) under which its cost is lowest, where that beats its current owner by ``margin``
-(:func:`assign`); ``rounds`` times. The whole result is kept only if the same cost, summed over every
+**Ownership.** After each body's search (bodies largest first), each Gaussian goes to the pose under which
+its cost is lowest, where that beats its current owner by ``margin`` (:func:`assign`), but only into a
+body whose joint the search chose or out of one to the base; ``rounds`` times. (Measured on stand-0000:
+re-assigning under joints the search had left alone drained 5874 of the parts' 7822 Gaussians to the
+base, since under a poor joint a part's Gaussians look better not moving, and the fit then turned the
+arm into a slide.) The whole result is kept only if the same cost, summed over every
 Gaussian under its owner, is lower on ``check_views`` held-out views per state than the starting model's
 (:func:`model_cost`). Forward projections only; the gradient fit (:mod:`.fit`) refines everything after.
 """
@@ -363,12 +366,23 @@ def model_cost(model: ArticulatedGaussians, views: ConsistencyViews) -> float:
 
 
 @torch.no_grad()
-def assign(model: ArticulatedGaussians, views: ConsistencyViews, margin: float, confidence: float = 4.0) -> int:
+def assign(model: ArticulatedGaussians, views: ConsistencyViews, margin: float, confidence: float = 4.0,
+           bodies: set[int] | None = None) -> int:
     """Give each Gaussian to the body whose pose makes it most consistent with the views, where that beats
-    its current owner by ``margin``; -> the number moved (logits reset to +/- confidence / 2)."""
+    its current owner by ``margin``; -> the number moved (logits reset to +/- confidence / 2). With
+    ``bodies`` (the bodies whose joints the search chose), a Gaussian moves only into one of them, or out
+    of one of them to the base: a joint nothing confirmed neither gains nor loses Gaussians (under a poor
+    joint a part's own Gaussians look better not moving, and would all drain to the base)."""
     c = pose_costs(model, views)
-    n = torch.arange(c.shape[0])
     cur = model.labels()
+    if bodies is not None:
+        allowed = torch.zeros(model.num_bodies, dtype=torch.bool)
+        allowed[sorted(bodies)] = True
+        ok = allowed[None].expand(c.shape[0], -1).clone()           # into a chosen body
+        ok[:, 0] = allowed[cur]                                     # to the base: only out of a chosen one
+        ok[torch.arange(c.shape[0]), cur] = True
+        c = torch.where(ok, c, torch.full_like(c, float("inf")))
+    n = torch.arange(c.shape[0])
     best = c.argmin(1)
     move = (best != cur) & (c[n, cur] - c[n, best] > margin)
     if bool(move.any()):
@@ -397,13 +411,17 @@ def search_joints(model: ArticulatedGaussians, frames: list[Frame], masks=None, 
     types = list(model.joint_types)
     before = model_cost(model, check) if check is not None else None
     res = SearchResult()
+    chosen: set[int] = set()
     for _ in range(max(1, cfg.rounds)):
         moved = 0
         for b in sorted(range(1, model.num_bodies), key=lambda b: -int((model.labels() == b).sum())):
             start, score, h = search_body(model, b, views, ramp, cfg)
             _set_joint(model, b - 1, *h)
             res.chosen[b] = {"type": h[0], "score_before": start, "score_after": score}
-            moved += assign(model, views, cfg.margin)
+            if score < start:
+                chosen.add(b)
+            if chosen:
+                moved += assign(model, views, cfg.margin, bodies=chosen)
         res.moved.append(moved)
     if check is not None:
         after = model_cost(model, check)

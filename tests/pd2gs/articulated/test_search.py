@@ -125,3 +125,19 @@ def test_a_body_that_never_moves_keeps_its_joint():
     assert res.chosen[1]["score_after"] == res.chosen[1]["score_before"]
     assert model.joint_types == ["prismatic"]
     assert torch.equal(model.axes.detach(), axis0) and torch.equal(model.values.detach(), values0)
+
+
+def test_gaussians_do_not_drain_from_a_body_whose_joint_the_search_did_not_choose(lid):
+    """Under a wrong 30 cm slide the lid's Gaussians match the views better not moving: free re-assignment
+    drains them to the base; restricted to the bodies the search chose (none here), nothing moves."""
+    from pd2gs.articulated.search import assign
+
+    scene, frames, masks = lid
+    views = ConsistencyViews(frames, masks, 4, per_state=4)
+    model = model_of(scene, scene.labels, ["prismatic"], [WRONG_AXIS], [lid_centre(scene)],
+                     np.linspace(0, 0.3, 4)[:, None])
+    assert assign(model, views, 0.05, bodies=set()) == 0
+    assert torch.equal(model.labels(), scene.labels)
+    n_lid = int((scene.labels == 1).sum())
+    drained = assign(model, views, 0.05)
+    assert drained > 0.3 * n_lid and int((model.labels() == 1).sum()) == n_lid - drained
