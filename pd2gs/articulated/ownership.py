@@ -85,12 +85,22 @@ def reassign(model: ArticulatedGaussians, frames: list[Frame], masks=None, margi
     ``margin`` (mean RGB error); -> the number of Gaussians moved. See :func:`colour_costs`."""
     cost = colour_costs(model, frames, masks, "train", max_views, depth_tol, background, backend)
     n = torch.arange(cost.shape[0])
-    cur = model.labels()
     # no view sees it under its owner: it moves only where another body matches the images within margin
-    cur_cost = torch.nan_to_num(cost[n, cur], nan=2 * margin)
-    cost = torch.nan_to_num(cost, nan=float("inf"))
+    cur_cost = torch.nan_to_num(cost[n, model.labels()], nan=2 * margin)
+    return move_to_cheapest(model, torch.nan_to_num(cost, nan=float("inf")), margin, confidence, cur_cost)
+
+
+@torch.no_grad()
+def move_to_cheapest(model: ArticulatedGaussians, cost: torch.Tensor, margin: float, confidence: float = 4.0,
+                     current: torch.Tensor | None = None) -> int:
+    """Give each Gaussian to the body of least ``cost`` (N, K+1) where that beats ``current`` (N,) (default:
+    its owner's cost) by ``margin``; its logits are reset to +/- confidence / 2. -> the number moved."""
+    n = torch.arange(cost.shape[0])
+    cur = model.labels()
+    if current is None:
+        current = cost[n, cur]
     best = cost.argmin(1)
-    move = (best != cur) & (cur_cost - cost[n, best] > margin)
+    move = (best != cur) & (current - cost[n, best] > margin)
     if bool(move.any()):
         logits = model.ownership_logits
         logits[move] = -confidence / 2

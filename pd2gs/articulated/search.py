@@ -57,7 +57,7 @@ import torch.nn.functional as F
 from pd2gs.data import Frame
 
 from .model import ArticulatedGaussians, axis_angle_matrix
-from .ownership import view_subset
+from .ownership import move_to_cheapest, view_subset
 
 Hypothesis = tuple[str, np.ndarray, np.ndarray, np.ndarray]  # (type, unit axis (3,), pivot (3,), values (S,))
 
@@ -278,20 +278,20 @@ def search_body(model: ArticulatedGaussians, b: int, views: ConsistencyViews, ra
         for p in [cur[2]] + [centre + e @ np.array([x, y]) for x in xs for y in ys]:
             rev += [(a, p, v * ramp) for v in angles if abs(v) > 1e-9]
         pri += [(a, centre, v * ramp) for v in slides if abs(v) > 1e-9]
-    starts = [(start, cur)]
+    starts: list[Hypothesis] = [cur]
     coarse = body.subset(cfg.coarse_points)
     for kind, hyps in (("revolute", rev), ("prismatic", pri)):
         sc = coarse.score(kind, [h[0] for h in hyps], [h[1] for h in hyps], [h[2] for h in hyps])
         for k in torch.argsort(sc).tolist():
-            a, p, v = hyps[k]
+            a, p, _ = hyps[k]
             if all(t != kind or abs(float(a @ a2)) < 0.985 or np.linalg.norm(np.cross(p - p2, a)) > 0.1 * extent
-                   for _, (t, a2, p2, _) in starts[1:]):
-                starts.append((float(body.score(kind, a[None], p[None], v[None])[0]), (kind, *hyps[k])))
-            if sum(t == kind for _, (t, *_) in starts[1:]) >= cfg.refine_starts:
+                   for t, a2, p2, _ in starts[1:]):
+                starts.append((kind, *hyps[k]))
+            if sum(h[0] == kind for h in starts[1:]) >= cfg.refine_starts:
                 break
     # every start refined on the coarse points; the best of them once more, at the finest steps, on all
     refined = [_refine(coarse, h, float(coarse.score(h[0], h[1][None], h[2][None], h[3][None])[0]), ramp,
-                       extent, cfg) for _, h in starts]
+                       extent, cfg) for h in starts]
     h = min(refined, key=lambda r: r[0])[1]
     score, h = _refine(body, h, float(body.score(h[0], h[1][None], h[2][None], h[3][None])[0]), ramp, extent,
                        cfg, first_level=cfg.levels - 2)
@@ -374,22 +374,15 @@ def assign(model: ArticulatedGaussians, views: ConsistencyViews, margin: float, 
     of one of them to the base: a joint nothing confirmed neither gains nor loses Gaussians (under a poor
     joint a part's own Gaussians look better not moving, and would all drain to the base)."""
     c = pose_costs(model, views)
-    cur = model.labels()
     if bodies is not None:
+        cur = model.labels()
         allowed = torch.zeros(model.num_bodies, dtype=torch.bool)
         allowed[sorted(bodies)] = True
         ok = allowed[None].expand(c.shape[0], -1).clone()           # into a chosen body
         ok[:, 0] = allowed[cur]                                     # to the base: only out of a chosen one
         ok[torch.arange(c.shape[0]), cur] = True
         c = torch.where(ok, c, torch.full_like(c, float("inf")))
-    n = torch.arange(c.shape[0])
-    best = c.argmin(1)
-    move = (best != cur) & (c[n, cur] - c[n, best] > margin)
-    if bool(move.any()):
-        logits = model.ownership_logits
-        logits[move] = -confidence / 2
-        logits[move, best[move]] = confidence / 2
-    return int(move.sum())
+    return move_to_cheapest(model, c, margin, confidence)
 
 
 @torch.no_grad()
