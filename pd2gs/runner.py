@@ -13,8 +13,8 @@ under the output folder ``out`` (every file written atomically: temp file or fol
     out/runs/<object_id>/object.json           the last attempt: status, failure reason, timings (s)
     out/runs/<object_id>/log.txt               the object's log, every attempt appended
 
-Resumption: an object whose every variant has a ``done`` result (with the same discovery settings) is
-skipped; a finished training run is reused (never retrained); a training run interrupted between
+Resumption: an object whose every variant has a ``done`` result (with the same discovery settings, made
+by the same discovery code: :func:`code_id`) is skipped; a finished training run is reused (never retrained); a training run interrupted between
 checkpoints continues from its last checkpoint, which restores the optimiser and every random generator
 (:meth:`pd2gs.train.Trainer.load_state_dict`), so it reaches the same field as an uninterrupted run.
 Discovery always reads the field back from ``checkpoint.pt``, so a fresh and a reused field are the same
@@ -26,6 +26,8 @@ rounding.
 from __future__ import annotations
 
 import dataclasses
+import functools
+import hashlib
 import logging
 import math
 import os
@@ -132,8 +134,23 @@ def _norm(obj: Any) -> Any:
     return json.loads(dumps_json(obj))
 
 
+@functools.lru_cache(maxsize=1)
+def code_id() -> str:
+    """SHA-256 (first 16 hex digits) of the source of the ``pd2gs`` package (every ``*.py`` under it, by
+    relative path and bytes): a stored discovery is reused only when the code that made it is the code that
+    would remake it. (Keyed by settings alone, a benchmark once rescored results made before a change to
+    model selection beside rows made after it.) Training runs are not keyed by it: they are reused
+    whatever changed, as they cost minutes per object."""
+    root = Path(__file__).resolve().parent
+    h = hashlib.sha256()
+    for f in sorted(root.rglob("*.py")):
+        h.update(f.relative_to(root).as_posix().encode() + b"\0" + f.read_bytes() + b"\0")
+    return h.hexdigest()[:16]
+
+
 def finished_result(run_dir: Path, variant: str, discovery=None) -> dict | None:
-    """The stored ``done`` result of ``variant`` (with these discovery settings, if given), else None.
+    """The stored ``done`` result of ``variant`` (with these discovery settings, if given, and made by this
+    :func:`code_id`), else None.
 
     A stored result's settings include the background taken from the trained field; ``discovery`` with
     ``background`` None matches any background. ``discovery``: a DiscoveryConfig.
@@ -151,7 +168,7 @@ def finished_result(run_dir: Path, variant: str, discovery=None) -> dict | None:
         want, have = _norm(dataclasses.asdict(discovery)), dict(res.get("discovery", {}))
         if want.get("background") is None:
             have["background"] = None
-        if want != have:
+        if want != have or res.get("code") != code_id():
             return None
     return res
 
@@ -251,7 +268,7 @@ def _discover_stage(task: ObjectTask, obj, run: Path, timings: dict) -> list[str
         timings[f"discover_s[{name}]"] = secs
         with atomic_dir(_result_dir(run, name), overwrite=True) as tmp:
             doc: dict[str, Any] = {"object_id": task.object_id, "variant": name, "discovery": _norm(
-                dataclasses.asdict(cfg)), "seconds": secs}
+                dataclasses.asdict(cfg)), "code": code_id(), "seconds": secs}
             if isinstance(res, ObjectFailure):
                 doc.update(status="failed", reason=str(res))
                 failed.append(f"{name}: {res}" if len(task.variants) > 1 else str(res))

@@ -3,6 +3,7 @@
 Two tiny rendered objects, 40 training iterations, discovery without refinement/articulation (the stages
 the runner schedules are all there; only their cost is cut). Submissions are compared byte for byte.
 """
+import dataclasses
 import json
 import os
 import signal
@@ -255,3 +256,19 @@ def test_runner_benchmark_script_runs(tmp_path):
     assert all(row["wall_s"] > 0 for row in rows)
     text = out.read_text()
     assert "| 1 |" in text and "| 2 |" in text and "speed-up" in text
+
+
+def test_a_stored_discovery_is_reused_only_when_the_same_code_made_it(tmp_path):
+    """Results keyed by settings alone once let a benchmark rescore discoveries made before a change to
+    model selection beside ones made after it."""
+    from pd2gs.discovery.config import DiscoveryConfig
+    from pd2gs.runner import _norm, code_id, finished_result
+
+    cfg = DiscoveryConfig()
+    res_dir = tmp_path / "results" / "default"
+    res_dir.mkdir(parents=True)
+    doc = {"status": "done", "discovery": _norm(dataclasses.asdict(cfg))}
+    for code, reused in ((code_id(), True), ("0" * 16, False), (None, False)):
+        (res_dir / "result.json").write_text(json.dumps({**doc, **({"code": code} if code else {})}))
+        assert (finished_result(tmp_path, "default", cfg) is not None) is reused, code
+    assert len(code_id()) == 16 and code_id() == code_id()
