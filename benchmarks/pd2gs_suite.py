@@ -47,6 +47,8 @@ ABLATIONS = {  # name -> DiscoveryConfig overrides (same trained field)
     "search": {"search": True},  # + the coarse joint and ownership search before the fit
     "depth": {"fit_depth": 1.0},  # + an L1 depth loss (its own track: the submission's inputs name depth)
     "fit-120": {"fit_max_side": 120},  # the articulated fit's views at 120 px instead of 80
+    "restarts-2": {"restarts": 2},  # seeds 0 and 1, the lower held-out L1 kept
+    "seed-1": {"seed": 1},  # the default with another discovery seed (same trained field): the run-to-run spread
 }
 
 

@@ -184,6 +184,10 @@ class DiscoveryConfig:
     """at most this many accepted edits."""
     final_iters: int = 300
     """Adam steps of the fit after selection (0: none)."""
+    restarts: int = 1
+    """articulated discovery runs from this many seeds (``seed``, ``seed`` + 1, ...); the model with the
+    lowest held-out L1 is kept (model selection over starts: the fit and selection end in different local
+    optima from one seed to the next)."""
 
     # --- meshing (paper App. A.2)
     voxel_size: float | None = None
@@ -205,6 +209,8 @@ class DiscoveryConfig:
 
     def __post_init__(self) -> None:
         check_choices(self)
+        if self.restarts < 1:
+            raise ConfigError("restarts must be >= 1")
         if self.n_states is not None and self.n_states < 2:
             raise ConfigError("n_states must be >= 2 (motion needs two states)")
         if not 0.0 <= self.tau_mot <= 1.0:
