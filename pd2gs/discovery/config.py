@@ -21,7 +21,8 @@ Ablation switches (docs/pd2gs-parts.md has the table):
 * ``fit_silhouette``  — articulated: weight of the object-silhouette loss (0 = RGB only).
 * ``fit_depth``       — articulated: weight of a depth loss (0, the default: PD²GS is RGB-only).
 * ``select``          — articulated: False keeps the initial part count, tree and types.
-* ``search``          — articulated: a coarse joint and ownership search, checked on held-out views, before the fit.
+* ``starts``          — articulated: the first joints (stage 1's Kabsch joints and/or the coarse joint search's);
+                        each is discovered and the lowest held-out L1 kept.
 * ``refine``, ``mask_provider``, ``cluster``, ``split_disconnected`` — paper mode's segmentation.
 * ``joint_rule``      — the Kabsch joints' type rule, "paper" or "bic" (None: the mode's own: "paper" in mode
   "paper", "bic" for the articulated initialisation).
@@ -158,11 +159,12 @@ class DiscoveryConfig:
     """RANSAC iterations of the rigid fit."""
 
     # --- the articulated model (mode "articulated"; pd2gs/articulated/)
-    search: bool = False
-    """coarse joint search before the fit (pd2gs/articulated/search.py): each body's joint chosen among
-    thousands of hypotheses (axes over the half sphere, hinge pivots on a grid, both types, a grid of
-    values) by how well its posed Gaussians agree with the training views' silhouettes and colours, and the
-    Gaussians re-assigned to the pose that suits them; kept where the held-out views agree too."""
+    starts: str = "kabsch"
+    """the first joints the articulated fit starts from, a comma list: ``kabsch`` (stage 1's Kabsch joints
+    on its motion clusters) and/or ``search`` (those after the coarse joint and ownership search,
+    pd2gs/articulated/search.py). Each start (times ``restarts``) is discovered to the end and the model
+    with the lowest held-out L1 kept: where the Kabsch joints are poor the search's start renders the
+    held-out views better, and where the search misleads, the Kabsch start does."""
     fit_iters: int = 600
     """Adam steps of the articulated fit (one random training view per step)."""
     fit_max_side: int = 80
@@ -209,12 +211,20 @@ class DiscoveryConfig:
 
     def __post_init__(self) -> None:
         check_choices(self)
+        bad = [x for x in self.start_list if x not in ("kabsch", "search")]
+        if bad or not self.start_list or len(set(self.start_list)) < len(self.start_list):
+            raise ConfigError(f"starts: {self.starts!r} must be a comma list of distinct 'kabsch', 'search'")
         if self.restarts < 1:
             raise ConfigError("restarts must be >= 1")
         if self.n_states is not None and self.n_states < 2:
             raise ConfigError("n_states must be >= 2 (motion needs two states)")
         if not 0.0 <= self.tau_mot <= 1.0:
             raise ConfigError("tau_mot must lie in [0, 1]")
+
+    @property
+    def start_list(self) -> list[str]:
+        """``starts`` as a list."""
+        return [x.strip() for x in self.starts.split(",") if x.strip()]
 
     def to_dict(self) -> dict:
         return asdict(self)

@@ -17,6 +17,7 @@
 """
 from __future__ import annotations
 
+import copy
 import dataclasses
 import logging
 import time
@@ -336,31 +337,35 @@ def model_joints(model: ArticulatedGaussians, states: list[str], start: str, end
 
 
 def articulated_parts(d: Discovery) -> None:
-    """Mode "articulated", ``cfg.restarts`` times from consecutive seeds; the run with the lowest held-out L1
-    (``diag["test_l1"]``, the views model selection scores on) is kept, the others' L1 in ``diag["restarts"]``."""
+    """Mode "articulated": per start of ``cfg.starts`` and seed (``cfg.restarts``) initialise -> (coarse joint
+    search) -> fit -> select -> the posed model's field, labels and joints; the run with the lowest held-out
+    L1 (``diag["test_l1"]``, on the views model selection scores on) is kept, every run's in
+    ``diag["starts"]`` when there was more than one."""
     d.frames, d.masks = training_views(d.obj, d.states, d.cfg)
-    if d.cfg.restarts == 1:
-        articulated_once(d)
-        return
-    runs = []
+    runs: list[tuple[str, Discovery]] = []
     for k in range(d.cfg.restarts):
-        dk = dataclasses.replace(d, cfg=dataclasses.replace(d.cfg, seed=d.cfg.seed + k), diag=dict(d.diag))
-        articulated_once(dk)
-        runs.append(dk)
-    best = min(runs, key=lambda r: r.diag["test_l1"])
+        base = dataclasses.replace(d, cfg=dataclasses.replace(d.cfg, seed=d.cfg.seed + k), diag=dict(d.diag))
+        initialise(base)
+        for i, start in enumerate(d.cfg.start_list):
+            last = i == len(d.cfg.start_list) - 1  # (the last start takes the model itself: no copy to fit)
+            run = base if last else dataclasses.replace(base, model=copy.deepcopy(base.model),
+                                                        diag=copy.deepcopy(base.diag))
+            if start == "search":
+                search(run)
+            articulated_fit(run)
+            runs.append((start, run))
+    _, best = min(runs, key=lambda r: r[1].diag["test_l1"])
     for f in dataclasses.fields(Discovery):
         if f.name != "cfg":
             setattr(d, f.name, getattr(best, f.name))
-    d.diag["restarts"] = {"seeds": [r.cfg.seed for r in runs], "test_l1": [r.diag["test_l1"] for r in runs],
-                          "chosen": best.cfg.seed}
+    if len(runs) > 1:
+        d.diag["starts"] = {"runs": [{"start": s, "seed": r.cfg.seed, "test_l1": r.diag["test_l1"]} for s, r in runs],
+                            "chosen": runs.index(next(x for x in runs if x[1] is best))}
 
 
-def articulated_once(d: Discovery) -> None:
-    """One articulated discovery: initialise -> coarse joint search (``search``) -> fit -> select -> the posed
-    model's field, labels and joints."""
-    initialise(d)
-    if d.cfg.search:
-        search(d)
+def articulated_fit(d: Discovery) -> None:
+    """From an initialised (and maybe searched) model: fit -> select -> the posed model's field, labels and
+    joints, and its held-out L1."""
     fit(d)
     if d.cfg.select:
         select(d)
@@ -457,7 +462,7 @@ def method_block(cfg: DiscoveryConfig, states_used: int | None = None) -> dict:
                              {"silhouette": cfg.fit_silhouette, "depth": cfg.fit_depth, "select": cfg.select,
                               "fit_max_side": cfg.fit_max_side, "fit_iters": cfg.fit_iters,
                               "select_penalty_rel": cfg.select_penalty_rel, "final_iters": cfg.final_iters,
-                              "joint_rule": cfg.joint_rule or "bic", "search": cfg.search,
+                              "joint_rule": cfg.joint_rule or "bic", "starts": cfg.starts,
                               "restarts": cfg.restarts})}}
 
 

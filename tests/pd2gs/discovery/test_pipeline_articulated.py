@@ -139,7 +139,7 @@ def test_the_search_step_records_its_choice_and_keeps_a_near_exact_start_near(da
     fld, _ = perfect_field(obj.twin, obj.meta, STATES, n=2000, jitter=0.002)
     fld = coloured(fld, obj)
     bg = tuple(float(c) for c in obj.states["m0"].views[0].rgb[0, 0] / 255.0)
-    d = P.stage1(fld, obj, DiscoveryConfig(fit_max_side=64, background=bg, search=True))
+    d = P.stage1(fld, obj, DiscoveryConfig(fit_max_side=64, background=bg, starts="search"))
     d.frames, d.masks = P.training_views(d.obj, d.states, d.cfg)
     P.initialise(d)
     P.search(d)
@@ -157,9 +157,9 @@ def test_the_search_step_records_its_choice_and_keeps_a_near_exact_start_near(da
     assert found == set(gt)  # both the door and the drawer carried by a body
 
 
-def test_restarts_keep_the_seed_whose_model_renders_the_held_out_views_best(data):
-    """``restarts``: one articulated discovery per seed; the kept one is the lowest held-out L1, and it is
-    the same model that seed alone gives."""
+def test_every_start_is_discovered_and_the_lowest_held_out_l1_kept(data):
+    """``starts`` x ``restarts``: one articulated discovery per start and seed; the kept one has the lowest
+    held-out L1, and it is the same model that start and seed alone give."""
     from pd2gs.discovery import pipeline as P
 
     torch.set_num_threads(1)
@@ -167,18 +167,31 @@ def test_restarts_keep_the_seed_whose_model_renders_the_held_out_views_best(data
     fld, _ = perfect_field(obj.twin, obj.meta, STATES, n=1200, jitter=0.002)
     fld = coloured(fld, obj)
     bg = tuple(float(c) for c in obj.states["m0"].views[0].rgb[0, 0] / 255.0)
-    cfg = DiscoveryConfig(fit_max_side=48, background=bg, fit_iters=60, select=False, restarts=2)
+    quick = dict(fit_max_side=48, background=bg, fit_iters=60, select=False)
 
-    def run(c):
-        d = P.stage1(fld, obj, c)
+    def run(**kw):
+        d = P.stage1(fld, obj, DiscoveryConfig(**quick, **kw))
         P.articulated_parts(d)
         return d
 
-    both = run(cfg)
-    r = both.diag["restarts"]
-    assert r["seeds"] == [0, 1] and len(r["test_l1"]) == 2 and r["test_l1"][0] != r["test_l1"][1]
-    assert r["chosen"] == r["seeds"][int(np.argmin(r["test_l1"]))] and both.diag["test_l1"] == min(r["test_l1"])
-    alone = run(DiscoveryConfig(fit_max_side=48, background=bg, fit_iters=60, select=False, seed=r["chosen"]))
-    assert alone.diag["test_l1"] == both.diag["test_l1"] and "restarts" not in alone.diag
-    assert torch.equal(alone.model.values, both.model.values) and np.array_equal(alone.labels, both.labels)
-    assert method_block(cfg)["discovery"]["restarts"] == 2
+    many = run(starts="kabsch,search", restarts=2)
+    runs = many.diag["starts"]["runs"]
+    assert [(r["start"], r["seed"]) for r in runs] == [("kabsch", 0), ("search", 0), ("kabsch", 1), ("search", 1)]
+    l1 = [r["test_l1"] for r in runs]
+    assert len(set(l1)) > 1 and many.diag["starts"]["chosen"] == int(np.argmin(l1))
+    assert many.diag["test_l1"] == min(l1)
+    best = runs[int(np.argmin(l1))]
+    alone = run(starts=best["start"], seed=best["seed"])
+    assert alone.diag["test_l1"] == many.diag["test_l1"] and "starts" not in alone.diag
+    assert torch.equal(alone.model.values, many.model.values) and np.array_equal(alone.labels, many.labels)
+    assert ("search" in many.diag) == (best["start"] == "search")
+    block = method_block(DiscoveryConfig(starts="kabsch,search", restarts=2))["discovery"]
+    assert block["starts"] == "kabsch,search" and block["restarts"] == 2
+
+
+@pytest.mark.parametrize("starts", ["", "kabsch,kabsch", "grid"])
+def test_bad_starts_are_refused_by_name(starts):
+    from pd2gs.config_cli import ConfigError
+
+    with pytest.raises(ConfigError, match="starts"):
+        DiscoveryConfig(starts=starts)
