@@ -46,11 +46,10 @@ ABLATIONS = {  # name -> DiscoveryConfig overrides (same trained field)
     "no-select": {"select": False},  # the initial count, tree and types
     "search": {"starts": "search"},  # from the coarse joint and ownership search's joints only
     "depth": {"fit_depth": 1.0},  # + an L1 depth loss (its own track: the submission's inputs name depth)
-    "fit-120": {"fit_max_side": 120},  # the articulated fit's views at 120 px instead of 80
+    "fit-80": {"fit_max_side": 80},  # the articulated fit's views at 80 px (the default before 2026-11-26)
     "restarts-2": {"restarts": 2},  # seeds 0 and 1, the lower held-out L1 kept
     "seed-1": {"seed": 1},  # the default with another discovery seed (same trained field): the run-to-run spread
-    "fit-120-seed-1": {"fit_max_side": 120, "seed": 1},  # the same for fit-120
-    "fit-120-search": {"fit_max_side": 120, "starts": "search"},
+    "fit-80-seed-1": {"fit_max_side": 80, "seed": 1},  # the same at 80 px
 }
 
 
