@@ -354,13 +354,14 @@ def articulated_parts(d: Discovery) -> None:
                 search(run)
             articulated_fit(run)
             runs.append((start, run))
-    _, best = min(runs, key=lambda r: r[1].diag["test_l1"])
+    chosen = min(range(len(runs)), key=lambda i: runs[i][1].diag["test_l1"])
+    best = runs[chosen][1]
     for f in dataclasses.fields(Discovery):
         if f.name != "cfg":
             setattr(d, f.name, getattr(best, f.name))
     if len(runs) > 1:
         d.diag["starts"] = {"runs": [{"start": s, "seed": r.cfg.seed, "test_l1": r.diag["test_l1"]} for s, r in runs],
-                            "chosen": runs.index(next(x for x in runs if x[1] is best))}
+                            "chosen": chosen}
 
 
 def articulated_fit(d: Discovery) -> None:
