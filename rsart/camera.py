@@ -41,11 +41,6 @@ class Intrinsics:
         return Intrinsics(width, height, self.fx * sx, self.fy * sy,
                           (self.cx + 0.5) * sx - 0.5, (self.cy + 0.5) * sy - 0.5, self.distortion)
 
-    def cropped(self, x0: int, y0: int, width: int, height: int) -> "Intrinsics":
-        """Intrinsics of the ``width`` x ``height`` window whose top-left pixel is (``x0``, ``y0``) of this
-        image: the principal point moves by (-x0, -y0) px; focal lengths and distortion are unchanged."""
-        return Intrinsics(width, height, self.fx, self.fy, self.cx - x0, self.cy - y0, self.distortion)
-
     @staticmethod
     def from_fov(width: int, height: int, fov_y_deg: float) -> "Intrinsics":
         """Square-pixel intrinsics with a vertical field of view in degrees, principal point centred."""
@@ -127,10 +122,6 @@ class Camera:
     def scaled(self, width: int, height: int) -> "Camera":
         """The same pose with intrinsics resampled to a new image size."""
         return Camera(self.intrinsics.scaled(width, height), self.c2w)
-
-    def cropped(self, x0: int, y0: int, width: int, height: int) -> "Camera":
-        """The same pose seeing only a ``width`` x ``height`` window of the image from pixel (x0, y0)."""
-        return Camera(self.intrinsics.cropped(x0, y0, width, height), self.c2w)
 
     def project(self, points_world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Project (N, 3) world points; returns (N, 2) pixel coords (u, v) and (N,) camera-frame depth z (m).

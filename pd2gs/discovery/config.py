@@ -171,10 +171,6 @@ class DiscoveryConfig:
     """the fit's training views are rendered at most this large (intrinsics scaled). 120 rather than 80:
     on 15 rsart-synth objects, over two seeds, mean Axis Ang 8.9° / 8.6° against 12.7° / 20.0°, in the
     same discovery time (docs/pd2gs-parts.md)."""
-    fit_crop: float | None = 0.1
-    """each fit view is cropped to the stage-1 Gaussians' projected extent, padded by this fraction of the
-    window's larger side (+ 2 px), before it is scaled to ``fit_max_side``: the object, not the background,
-    gets the pixels. None: whole frames."""
     fit_silhouette: float = 0.5
     """weight of the L1 between rendered alpha and the view's object mask (0: RGB only)."""
     fit_depth: float = 0.0

@@ -203,61 +203,30 @@ def stage1(field_or_model: Any, obj, cfg: DiscoveryConfig) -> Discovery:
 
 
 # ----------------------------------------------------------------------------- mode "articulated"
-def crop_box(cam: Camera, points: np.ndarray, margin: float) -> tuple[int, int, int, int] | None:
-    """The window (x0, y0, width, height) px of ``cam``'s image holding the projections of ``points`` (N, 3)
-    world, padded on every side by ``margin`` x its larger side + 2 px and clipped to the image; None when a
-    point is behind the camera or the window would be the whole image."""
-    if not len(points):
-        return None
-    uv, z = cam.project(points)
-    if not (z > 0).all() or not np.isfinite(uv).all():
-        return None
-    lo, hi = uv.min(0), uv.max(0)
-    pad = margin * float((hi - lo).max()) + 2.0
-    x0, y0 = max(0, int(np.floor(lo[0] - pad))), max(0, int(np.floor(lo[1] - pad)))
-    x1, y1 = min(cam.width, int(np.ceil(hi[0] + pad)) + 1), min(cam.height, int(np.ceil(hi[1] + pad)) + 1)
-    if x1 <= x0 or y1 <= y0 or (x0, y0, x1, y1) == (0, 0, cam.width, cam.height):
-        return None
-    return x0, y0, x1 - x0, y1 - y0
-
-
-def training_views(obj, states: list[str], cfg: DiscoveryConfig, fld: StateField | None = None
-                   ) -> tuple[list[Frame], list[torch.Tensor | None]]:
+def training_views(obj, states: list[str], cfg: DiscoveryConfig) -> tuple[list[Frame], list[torch.Tensor | None]]:
     """Every captured view of the used states, at most ``cfg.fit_max_side`` px (intrinsics scaled), keeping
     the dataset's train/test split -> (frames, per frame the object silhouette (H, W) in {0, 1} = mask > 0,
     or None where the view has no mask or ``cfg.fit_silhouette`` is 0). Depth is read only when
-    ``cfg.fit_depth`` > 0. A state with no ``test`` view lends every fifth train view to model selection.
-
-    With ``fld`` (the stage-1 field, holding every state of ``states``) and ``cfg.fit_crop`` set, each view
-    is first cropped to the window around the projections of that state's Gaussians (opacity at least
-    ``cfg.fit_min_opacity``; :func:`crop_box`), so the pixel budget goes to the object, not the background."""
+    ``cfg.fit_depth`` > 0. A state with no ``test`` view lends every fifth train view to model selection."""
     frames: list[Frame] = []
     masks: list[torch.Tensor | None] = []
     for k, sid in enumerate(states):
         views = obj.states[sid].views
         has_test = any(v.split == "test" for v in views)
-        pts = None
-        if fld is not None and cfg.fit_crop is not None:
-            pts = fld.means[fld.index(sid)][fld.opacities >= cfg.fit_min_opacity]
         for i, v in enumerate(views):
             cam = v.camera
-            box = crop_box(cam, pts, cfg.fit_crop) if pts is not None else None
-            win = (slice(None), slice(None))
-            if box is not None:
-                x0, y0, w, h = box
-                cam, win = cam.cropped(x0, y0, w, h), (slice(y0, y0 + h), slice(x0, x0 + w))
             s = min(1.0, cfg.fit_max_side / max(cam.width, cam.height))
             if s < 1.0:
                 cam = cam.scaled(max(1, round(cam.width * s)), max(1, round(cam.height * s)))
-            rgb = torch.from_numpy(_resize(v.rgb[win], cam).astype(np.float32) / 255.0)
+            rgb = torch.from_numpy(_resize(v.rgb, cam).astype(np.float32) / 255.0)
             depth = None
             if cfg.fit_depth > 0 and v.has_depth:
-                depth = torch.from_numpy(_resize(v.depth[win], cam, nearest=True).astype(np.float32))
+                depth = torch.from_numpy(_resize(v.depth, cam, nearest=True).astype(np.float32))
             split = v.split if has_test else ("test" if i % 5 == 4 else "train")
             frames.append(Frame(rgb, depth, _t(cam.K), _t(cam.w2c), k, split, v.id))
             mask = None
             if cfg.fit_silhouette > 0 and v.has_mask:
-                mask = torch.from_numpy((_resize(v.mask[win], cam, nearest=True) > 0).astype(np.float32))
+                mask = torch.from_numpy((_resize(v.mask, cam, nearest=True) > 0).astype(np.float32))
             masks.append(mask)
     return frames, masks
 
@@ -372,7 +341,7 @@ def articulated_parts(d: Discovery) -> None:
     search) -> fit -> select -> the posed model's field, labels and joints; the run with the lowest held-out
     L1 (``diag["test_l1"]``, on the views model selection scores on) is kept, every run's in
     ``diag["starts"]`` when there was more than one."""
-    d.frames, d.masks = training_views(d.obj, d.states, d.cfg, d.fld)
+    d.frames, d.masks = training_views(d.obj, d.states, d.cfg)
     runs: list[tuple[str, Discovery]] = []
     for k in range(d.cfg.restarts):
         base = dataclasses.replace(d, cfg=dataclasses.replace(d.cfg, seed=d.cfg.seed + k), diag=dict(d.diag))
@@ -492,7 +461,7 @@ def method_block(cfg: DiscoveryConfig, states_used: int | None = None) -> dict:
                           **({"refine": cfg.refine, "mask_provider": cfg.mask_provider, "cluster": cfg.cluster,
                               "joint_rule": cfg.joint_rule or "paper"} if cfg.mode == "paper" else
                              {"silhouette": cfg.fit_silhouette, "depth": cfg.fit_depth, "select": cfg.select,
-                              "fit_max_side": cfg.fit_max_side, "fit_crop": cfg.fit_crop, "fit_iters": cfg.fit_iters,
+                              "fit_max_side": cfg.fit_max_side, "fit_iters": cfg.fit_iters,
                               "select_penalty_rel": cfg.select_penalty_rel, "final_iters": cfg.final_iters,
                               "joint_rule": cfg.joint_rule or "bic", "starts": cfg.starts,
                               "restarts": cfg.restarts})}}

@@ -43,19 +43,6 @@ def test_intrinsics_scaled_keeps_pixel_centres():
     assert (K.fx, K.cx, K.cy) == (150.0, 79.5, 59.5)
 
 
-def test_a_cropped_camera_sees_the_same_points_at_the_window_pixels():
-    cam = Camera(Intrinsics(320, 240, 300.0, 290.0, 159.5, 119.5), np.eye(4))
-    pts = np.random.default_rng(1).uniform([-0.3, -0.2, 1.0], [0.3, 0.2, 2.0], (50, 3))
-    crop = cam.cropped(40, 25, 200, 150)
-    assert (crop.width, crop.height) == (200, 150) and crop.K[0, 0] == cam.K[0, 0]
-    (uv, z), (uv_c, z_c) = cam.project(pts), crop.project(pts)
-    np.testing.assert_allclose(uv_c, uv - [40, 25], atol=1e-9)
-    np.testing.assert_allclose(z_c, z)
-    # cropping, then scaling, keeps pixel centres: the window's scaled image sees the point where it lands
-    both = crop.scaled(100, 75)
-    np.testing.assert_allclose(both.project(pts)[0], (uv - [40, 25] + 0.5) * 0.5 - 0.5, atol=1e-9)
-
-
 def test_png_round_trips(tmp_path):
     rgb = np.random.default_rng(0).integers(0, 255, (5, 7, 3), dtype=np.uint8)
     write_png_rgb(tmp_path / "a.png", rgb)

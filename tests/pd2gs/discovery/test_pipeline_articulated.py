@@ -47,40 +47,6 @@ def test_training_views_keep_the_split_scale_the_cameras_and_give_silhouettes(da
     assert with_depth[0].depth is not None and float(with_depth[0].depth.max()) > 0
 
 
-def _on_silhouette(f, m, fld) -> float:
-    """Share of the field's points of ``f``'s state that ``f``'s camera projects onto its silhouette ``m``."""
-    x = fld.means[f.state]
-    xc = x @ f.w2c[:3, :3].double().numpy().T + f.w2c[:3, 3].double().numpy()
-    uv = xc[:, :2] / xc[:, 2:3] @ f.K[:2, :2].double().numpy().T + f.K[:2, 2].double().numpy()
-    u, v = np.clip(np.round(uv).astype(int), 0, [f.size[0] - 1, f.size[1] - 1]).T
-    return float(m.numpy()[v, u].mean())
-
-
-def test_training_views_crop_each_view_to_the_object_and_keep_the_cameras_true(data):
-    obj = rsart.load(data / "cabinet-0000")
-    fld, _ = perfect_field(obj.twin, obj.meta, STATES, n=1500)
-    views = [v for s in STATES for v in obj.states[s].views]
-    # unscaled: each frame is exactly its view's window, at the pixel offset its intrinsics say
-    exact, _ = training_views(obj, STATES, DiscoveryConfig(fit_max_side=10_000), fld)
-    for f, v in zip(exact, views):
-        x0, y0 = (v.camera.K[:2, 2] - f.K[:2, 2].double().numpy()).round().astype(int)
-        np.testing.assert_allclose(f.K[:2, 2].double().numpy(), v.camera.K[:2, 2] - [x0, y0], atol=1e-4)
-        w, h = f.size
-        assert (w, h) != (v.camera.width, v.camera.height) and x0 >= 0 and y0 >= 0
-        np.testing.assert_array_equal(f.rgb.numpy(), v.rgb[y0:y0 + h, x0:x0 + w].astype(np.float32) / 255.0)
-    # scaled to 48 px: the object gets more of the pixels, is never cut, and still lands on its silhouette
-    whole, whole_masks = training_views(obj, STATES, DiscoveryConfig(fit_max_side=48, fit_crop=None), fld)
-    frames, masks = training_views(obj, STATES, DiscoveryConfig(fit_max_side=48), fld)
-    assert [f.view_id for f in frames] == [f.view_id for f in whole] and len(masks) == len(frames)
-    assert np.mean([float(m.mean()) for m in masks]) > 1.5 * np.mean([float(m.mean()) for m in whole_masks])
-    for f, m in zip(frames, masks):
-        assert max(f.size) <= 48  # a window smaller than 48 px is kept at its captured size, not upsampled
-        assert float(torch.cat([m[0], m[-1], m[:, 0], m[:, -1]]).sum()) == 0  # the margin keeps it all inside
-    # (single frames differ by boundary rounding at 48 px; over all views the crop does at least as well)
-    on_crop = np.mean([_on_silhouette(f, m, fld) for f, m in zip(frames, masks)])
-    assert on_crop > 0.94 and on_crop >= np.mean([_on_silhouette(f, m, fld) for f, m in zip(whole, whole_masks)]) - 0.005
-
-
 def coloured(fld, obj):
     """The perfect field with each Gaussian's colour read from the captured views of every state where it is
     visible there (its depth matches the view's depth within 1 cm; median over views), as stage 1, trained
