@@ -50,6 +50,9 @@ ABLATIONS = {  # name -> DiscoveryConfig overrides (same trained field)
     "restarts-2": {"restarts": 2},  # seeds 0 and 1, the lower held-out L1 kept
     "seed-1": {"seed": 1},  # the default with another discovery seed (same trained field): the run-to-run spread
     "fit-80-seed-1": {"fit_max_side": 80, "seed": 1},  # the same at 80 px
+    "search-seed-1": {"starts": "search", "seed": 1},
+    "kabsch": {"starts": "kabsch"},  # from stage 1's Kabsch joints only (the default until 2026-11-26)
+    "kabsch-seed-1": {"starts": "kabsch", "seed": 1},
 }
 
 

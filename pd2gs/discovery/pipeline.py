@@ -340,28 +340,39 @@ def articulated_parts(d: Discovery) -> None:
     """Mode "articulated": per start of ``cfg.starts`` and seed (``cfg.restarts``) initialise -> (coarse joint
     search) -> fit -> select -> the posed model's field, labels and joints; the run with the lowest held-out
     L1 (``diag["test_l1"]``, on the views model selection scores on) is kept, every run's in
-    ``diag["starts"]`` when there was more than one."""
+    ``diag["starts"]`` when there was more than one. A search that keeps nothing leaves the initial model
+    as it was, so that start shares the Kabsch start's fit instead of repeating it."""
     d.frames, d.masks = training_views(d.obj, d.states, d.cfg)
-    runs: list[tuple[str, Discovery]] = []
+    runs: list[tuple[str, Discovery, dict]] = []  # (start, run, note: "fit_of" = the run whose fit it shares)
     for k in range(d.cfg.restarts):
         base = dataclasses.replace(d, cfg=dataclasses.replace(d.cfg, seed=d.cfg.seed + k), diag=dict(d.diag))
         initialise(base)
+        unchanged: Discovery | None = None  # this seed's fitted run that started from the initial model as is
         for i, start in enumerate(d.cfg.start_list):
             last = i == len(d.cfg.start_list) - 1  # (the last start takes the model itself: no copy to fit)
             run = base if last else dataclasses.replace(base, model=copy.deepcopy(base.model),
                                                         diag=copy.deepcopy(base.diag))
             if start == "search":
                 search(run)
+            note = {}
+            if start == "kabsch" or not run.diag["search"]["kept"]:
+                # a search that kept nothing restored the initial model bitwise: its fit would repeat this one
+                if unchanged is not None:
+                    runs.append((start, unchanged, {"fit_of": next(i for i, r in enumerate(runs) if r[1] is unchanged),
+                                                    "search_kept": False}))
+                    continue
+                unchanged = run
+                note = {"search_kept": False} if start == "search" else {}
             articulated_fit(run)
-            runs.append((start, run))
+            runs.append((start, run, note))
     chosen = min(range(len(runs)), key=lambda i: runs[i][1].diag["test_l1"])
     best = runs[chosen][1]
     for f in dataclasses.fields(Discovery):
         if f.name != "cfg":
             setattr(d, f.name, getattr(best, f.name))
     if len(runs) > 1:
-        d.diag["starts"] = {"runs": [{"start": s, "seed": r.cfg.seed, "test_l1": r.diag["test_l1"]} for s, r in runs],
-                            "chosen": chosen}
+        d.diag["starts"] = {"runs": [{"start": s, "seed": r.cfg.seed, "test_l1": r.diag["test_l1"], **note}
+                                     for s, r, note in runs], "chosen": chosen}
 
 
 def articulated_fit(d: Discovery) -> None:

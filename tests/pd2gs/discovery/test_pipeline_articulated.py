@@ -185,6 +185,18 @@ def test_every_start_is_discovered_and_the_lowest_held_out_l1_kept(data):
     assert alone.diag["test_l1"] == many.diag["test_l1"] and "starts" not in alone.diag
     assert torch.equal(alone.model.values, many.model.values) and np.array_equal(alone.labels, many.labels)
     assert ("search" in many.diag) == (best["start"] == "search")
+    # a search that keeps nothing (as here, on the near-exact field) restores the initial model, so its start
+    # shares the Kabsch start's fit instead of repeating it; fitted on its own it gives the very same model
+    shared = [r for r in runs if "fit_of" in r]
+    for r in shared:
+        twin = runs[r["fit_of"]]
+        assert r["search_kept"] is False and (twin["start"], twin["seed"]) == ("kabsch", r["seed"])
+        assert r["test_l1"] == twin["test_l1"]
+    if shared:
+        searched = run(starts="search", seed=shared[0]["seed"])
+        kabsch = run(starts="kabsch", seed=shared[0]["seed"])
+        assert searched.diag["search"]["kept"] is False
+        assert torch.equal(searched.model.values, kabsch.model.values) and np.array_equal(searched.labels, kabsch.labels)
     block = method_block(DiscoveryConfig(starts="kabsch,search", restarts=2))["discovery"]
     assert block["starts"] == "kabsch,search" and block["restarts"] == 2
 
