@@ -343,27 +343,26 @@ def articulated_parts(d: Discovery) -> None:
     ``diag["starts"]`` when there was more than one. A search that keeps nothing leaves the initial model
     as it was, so that start shares the Kabsch start's fit instead of repeating it."""
     d.frames, d.masks = training_views(d.obj, d.states, d.cfg)
-    runs: list[tuple[str, Discovery, dict]] = []  # (start, run, note: "fit_of" = the run whose fit it shares)
+    runs: list[tuple[str, Discovery, dict]] = []  # (start, run, note: "fit_of" = index of the run it shares)
     for k in range(d.cfg.restarts):
         base = dataclasses.replace(d, cfg=dataclasses.replace(d.cfg, seed=d.cfg.seed + k), diag=dict(d.diag))
         initialise(base)
-        unchanged: Discovery | None = None  # this seed's fitted run that started from the initial model as is
+        plain: int | None = None  # index in runs of this seed's fit from the initial model as it is
         for i, start in enumerate(d.cfg.start_list):
             last = i == len(d.cfg.start_list) - 1  # (the last start takes the model itself: no copy to fit)
             run = base if last else dataclasses.replace(base, model=copy.deepcopy(base.model),
                                                         diag=copy.deepcopy(base.diag))
+            note = {}
             if start == "search":
                 search(run)
-            note = {}
-            if start == "kabsch" or not run.diag["search"]["kept"]:
+                note["search_kept"] = run.diag["search"]["kept"]
+            if not note.get("search_kept") and plain is not None:
                 # a search that kept nothing restored the initial model bitwise: its fit would repeat this one
-                if unchanged is not None:
-                    runs.append((start, unchanged, {"fit_of": next(i for i, r in enumerate(runs) if r[1] is unchanged),
-                                                    "search_kept": False}))
-                    continue
-                unchanged = run
-                note = {"search_kept": False} if start == "search" else {}
+                runs.append((start, runs[plain][1], {**note, "fit_of": plain}))
+                continue
             articulated_fit(run)
+            if not note.get("search_kept"):
+                plain = len(runs)
             runs.append((start, run, note))
     chosen = min(range(len(runs)), key=lambda i: runs[i][1].diag["test_l1"])
     best = runs[chosen][1]
