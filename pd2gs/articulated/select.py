@@ -25,6 +25,10 @@ loop applies the best edit while it improves the score:
 * ``swap(b)``: b's joint type changes (revolute <-> prismatic), parameters from discovery's Kabsch fit
   (``robust_rigid`` + ``revolute_params`` / ``prismatic_params``) on the same centres.
 
+After the structure rounds, a **type phase** (``type_check``) runs rounds of swaps only, every one re-fitted
+(none screened out): a joint of the other type built from a fit of one type renders poorly until it is
+re-fitted itself, so screening by the score as built kept far hinges that imitate slides.
+
 Assumes the canonical frame is the reference state's pose (joint values 0 there), as :mod:`pd2gs.discovery.initialise` builds.
 """
 from __future__ import annotations
@@ -55,7 +59,8 @@ class SelectConfig:
     ``max_rounds`` greedy rounds; an edit is taken only when it lowers the score by more than ``min_gain``
     (None: half the penalty)
     (ties go to the incumbent: a swap or re-parent adds no body, so the penalty cannot stop it, and a short
-    re-fit's noise alone must not change the tree)."""
+    re-fit's noise alone must not change the tree); ``type_check``: after the structure rounds, every
+    joint's type swap is re-fitted, unscreened, in rounds of its own."""
 
     penalty: float | None = None
     penalty_rel: float = 0.02
@@ -65,6 +70,7 @@ class SelectConfig:
     refit_top: int | None = 3
     screen_views: int | None = 2
     min_gain: float | None = None
+    type_check: bool = True
 
 
 @dataclass
@@ -260,29 +266,49 @@ def select_model(model: ArticulatedGaussians, frames: list[Frame], masks=None, c
             cands = [cands[i] for _, i in screened[: cfg.refit_top]]
         if not cands:
             break
-        # the incumbent gets the same re-fit as the candidates, so an edit wins by its structure and not by
-        # the extra steps (measured: re-parenting one of two coaxial lids, a model that renders identically,
-        # gained 6 % of the held-out L1 from its re-fit alone and doubled that lid's reported motion)
-        kept = copy.deepcopy(best)
-        fit_articulated(kept, frames, masks, cfg.refit)
-        kept_score = score(kept, frames, cfg)
-        if kept_score < best_score:
-            best, best_score = kept, kept_score
-        sel.log.append({"edit": "keep", "score": best_score})
-        trials = []
-        for edit, cand in cands:
-            built = score(cand, frames, cfg)
-            fitted = copy.deepcopy(cand)
-            fit_articulated(fitted, frames, masks, cfg.refit)
-            s = score(fitted, frames, cfg)
-            # a short re-fit can also make a candidate that was already right worse (single-view Adam steps):
-            # the candidate is the better of the two
-            trials.append((s, edit, fitted) if s <= built else (built, edit, cand))
-            sel.log.append({**edit, "score": trials[-1][0], "built": built})
-        s, edit, cand = min(trials, key=lambda t: t[0])
-        if s >= best_score - cfg.min_gain:
+        best, best_score, taken = _round(best, best_score, cands, frames, masks, cfg, sel.log)
+        if not taken:
             break
-        best, best_score = cand, s
-        sel.log.append({**edit, "chosen": True, "score": s})
+    # every joint's other type, re-fitted: a swap built from a fit of one type renders poorly before its
+    # own re-fit, so screening by the score as built drops it (measured: drawer-0001's drawers stayed hinges
+    # 1 m away whose swaps never reached the re-fitted three)
+    for _ in range(cfg.max_rounds if cfg.type_check else 0):
+        swaps = [(e, c) for e, c in candidates(best, ref, trajectories) if e["edit"] == "swap"]
+        if not swaps:
+            break
+        best, best_score, taken = _round(best, best_score, swaps, frames, masks, cfg, sel.log, phase="type")
+        if not taken:
+            break
     sel.model, sel.score = best, best_score
     return sel
+
+
+def _round(best: ArticulatedGaussians, best_score: float, cands: list[tuple[dict, ArticulatedGaussians]],
+           frames: list[Frame], masks, cfg: SelectConfig, log: list[dict], phase: str = "structure"
+           ) -> tuple[ArticulatedGaussians, float, bool]:
+    """One greedy round: re-fit the incumbent and every candidate with ``cfg.refit``; the best candidate
+    replaces the incumbent if it beats it by more than ``cfg.min_gain`` -> (model, score, taken)."""
+    # the incumbent gets the same re-fit as the candidates, so an edit wins by its structure and not by
+    # the extra steps (measured: re-parenting one of two coaxial lids, a model that renders identically,
+    # gained 6 % of the held-out L1 from its re-fit alone and doubled that lid's reported motion)
+    kept = copy.deepcopy(best)
+    fit_articulated(kept, frames, masks, cfg.refit)
+    kept_score = score(kept, frames, cfg)
+    if kept_score < best_score:
+        best, best_score = kept, kept_score
+    log.append({"edit": "keep", "score": best_score, "phase": phase})
+    trials = []
+    for edit, cand in cands:
+        built = score(cand, frames, cfg)
+        fitted = copy.deepcopy(cand)
+        fit_articulated(fitted, frames, masks, cfg.refit)
+        s = score(fitted, frames, cfg)
+        # a short re-fit can also make a candidate that was already right worse (single-view Adam steps):
+        # the candidate is the better of the two
+        trials.append((s, edit, fitted) if s <= built else (built, edit, cand))
+        log.append({**edit, "score": trials[-1][0], "built": built})
+    s, edit, cand = min(trials, key=lambda t: t[0])
+    if s >= best_score - cfg.min_gain:
+        return best, best_score, False
+    log.append({**edit, "chosen": True, "score": s, "phase": phase})
+    return cand, s, True

@@ -165,8 +165,8 @@ class DiscoveryConfig:
     pd2gs/articulated/search.py). Each start (times ``restarts``) is discovered to the end and the model
     with the lowest held-out L1 kept: where the Kabsch joints are poor the search's start renders the
     held-out views better, and where the search misleads, the Kabsch start does. Both by default: on 15
-    rsart-synth objects over two seeds, 17 and 18 of 30 parts within 1° against 14 and 15 from ``kabsch``
-    alone, at about twice the discovery time (docs/pd2gs-parts.md)."""
+    rsart-synth objects over two seeds at one thread, 17 and 16 of 30 parts within 1° against 15 and 13
+    from ``kabsch`` alone, at about twice the discovery time (docs/pd2gs-parts.md)."""
     fit_iters: int = 600
     """Adam steps of the articulated fit (one random training view per step)."""
     fit_max_side: int = 120

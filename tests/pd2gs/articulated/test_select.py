@@ -153,6 +153,28 @@ def test_selection_turns_a_far_hinge_imitating_the_trays_slide_into_a_slide():
     assert abs(float(sel.model.unit_axes[0].detach() @ torch.as_tensor(slide, dtype=torch.float32))) > 0.99
 
 
+def test_the_type_phase_re_fits_a_swap_that_screening_dropped():
+    """With the structure rounds re-fitting no candidate at all (``refit_top=0``), the far hinge can only
+    become a slide in the type phase, where every swap is re-fitted unscreened."""
+    torch.set_num_threads(1)
+    scene = make_scene("tray", n=1200)
+    frames, masks = render_scene(scene, views=8, size=(48, 36))
+    R = 3.0
+    pivot = scene.pivots[0] + R * np.array([0.0, 0.0, 1.0])
+    model = ArticulatedGaussians(gaussians_of(scene), [-1, 0], ["revolute"], np.array([[-1.0, 0.0, 0.0]]),
+                                 pivot[None], np.arcsin(scene.values[:, :1] / R), scene.labels)
+    sel = select_model(model, frames, masks, SelectConfig(refit=FitConfig(iters=80), refit_top=0),
+                       trajectories(scene))
+    assert sel.model.joint_types == ["prismatic"], sel.log
+    chosen = [e for e in sel.log if e.get("chosen")]
+    assert [(e["edit"], e["phase"]) for e in chosen] == [("swap", "type")], sel.log
+    slide = torch.as_tensor(scene.axes[0], dtype=torch.float32)
+    assert abs(float(sel.model.unit_axes[0].detach() @ slide)) > 0.99
+    off = select_model(model, frames, masks, SelectConfig(refit=FitConfig(iters=80), refit_top=0,
+                                                          type_check=False), trajectories(scene))
+    assert off.model.joint_types == ["revolute"], off.log
+
+
 @pytest.mark.slow
 def test_selection_keeps_the_flat_tree_of_two_coaxial_half_lids(cfg):
     """Hanging one half lid on the other renders exactly as the flat tree (same hinge line): the truth stays
