@@ -198,15 +198,7 @@ def candidates(model: ArticulatedGaussians, ref: int = 0, trajectories: np.ndarr
                 owner = ident.copy()
                 owner[b] = a
                 out.append(({"edit": "merge", "body": b, "into": a}, rebuild(model, owner, parent)))
-        swapped = "prismatic" if model.joint_types[b - 1] == "revolute" else "revolute"
-        # the new joint read off stage 1's trajectories, and off the body's motion as the model poses it (a
-        # fitted far hinge already moves the body as the images show; a fitted slide holds no rotation to
-        # read a hinge from, so that one is offered only from revolute to prismatic)
-        sources = [("trajectories", trajectories)] + ([("posed", None)] if swapped == "prismatic"
-                                                      and trajectories is not None else [])
-        for src, traj in sources:
-            out.append(({"edit": "swap", "body": b, "type": swapped, "from": src},
-                        rebuild(model, ident, parent, {b: relative_joint(model, b, parent[b], ref, traj, swapped)})))
+        out += swaps(model, b, ref, trajectories)
         for p in range(1, n):
             descendants = {b}
             for c in range(1, n):  # parents precede children, one pass suffices
@@ -219,6 +211,21 @@ def candidates(model: ArticulatedGaussians, ref: int = 0, trajectories: np.ndarr
             out.append(({"edit": "reparent", "body": b, "parent": p},
                         rebuild(model, ident, par, {b: relative_joint(model, b, p, ref, trajectories)})))
     return out
+
+
+def swaps(model: ArticulatedGaussians, b: int, ref: int = 0, trajectories: np.ndarray | None = None
+          ) -> list[tuple[dict, ArticulatedGaussians]]:
+    """Body b's joint-type swaps (revolute <-> prismatic), as :func:`candidates` offers them."""
+    swapped = "prismatic" if model.joint_types[b - 1] == "revolute" else "revolute"
+    # the new joint read off stage 1's trajectories, and off the body's motion as the model poses it (a
+    # fitted far hinge already moves the body as the images show; a fitted slide holds no rotation to
+    # read a hinge from, so that one is offered only from revolute to prismatic)
+    sources = [("trajectories", trajectories)] + ([("posed", None)] if swapped == "prismatic"
+                                                  and trajectories is not None else [])
+    parent, ident = list(model.parent), list(range(model.num_bodies))
+    return [({"edit": "swap", "body": b, "type": swapped, "from": src},
+             rebuild(model, ident, parent, {b: relative_joint(model, b, parent[b], ref, traj, swapped)}))
+            for src, traj in sources]
 
 
 def complexity(model: ArticulatedGaussians) -> int:
@@ -273,10 +280,11 @@ def select_model(model: ArticulatedGaussians, frames: list[Frame], masks=None, c
     # own re-fit, so screening by the score as built drops it (measured: drawer-0001's drawers stayed hinges
     # 1 m away whose swaps never reached the re-fitted three)
     for _ in range(cfg.max_rounds if cfg.type_check else 0):
-        swaps = [(e, c) for e, c in candidates(best, ref, trajectories) if e["edit"] == "swap"]
-        if not swaps:
+        sizes = np.bincount(best.labels().numpy(), minlength=best.num_bodies)
+        cands = [c for b in range(1, best.num_bodies) if sizes[b] >= 3 for c in swaps(best, b, ref, trajectories)]
+        if not cands:
             break
-        best, best_score, taken = _round(best, best_score, swaps, frames, masks, cfg, sel.log, phase="type")
+        best, best_score, taken = _round(best, best_score, cands, frames, masks, cfg, sel.log, phase="type")
         if not taken:
             break
     sel.model, sel.score = best, best_score
