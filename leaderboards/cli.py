@@ -10,7 +10,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from rsart.errors import RsartError
+from rsart.errors import RsartError, guarded
 
 DB_HELP = "result store: a SQLAlchemy URL (e.g. postgresql://user@host/db) or a SQLite file path"
 
@@ -169,20 +169,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.set_defaults(func=lambda a: (parser.print_help(), 2)[1])
     add_actions(parser.add_subparsers(dest="leaderboard_command", metavar="ACTION"))
     args = parser.parse_args(sys.argv[1:] if argv is None else argv)
-    try:
-        return int(args.func(args) or 0)
-    except RsartError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
-    except ImportError as e:  # a module of a missing extra (e.g. [server]): one line, no traceback
-        from rsart.extras import from_import_error
-
-        if (err := from_import_error(e)) is None:
-            raise
-        print(f"error: {err}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        return 130
+    return guarded(lambda: args.func(args))
 
 
 if __name__ == "__main__":

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pd2gs  # noqa: F401  (sets OMP_WAIT_POLICY before torch loads)
 from pd2gs.config_cli import add_option, overrides, value
-from rsart.errors import RsartError
+from rsart.errors import RsartError, guarded
 
 
 class UsageError(RsartError):
@@ -235,20 +235,17 @@ def _run(args) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``pd2gs`` console script. Every error pd2gs raises on purpose is an
-    :class:`~rsart.errors.RsartError`: printed here without a traceback, exit status 2."""
+    :class:`~rsart.errors.RsartError`: printed here without a traceback, exit status 2; a bug is one line,
+    exit status 1 (:func:`rsart.errors.guarded`)."""
     args = _parser().parse_args(argv)  # --help stays fast: torch loads only for a command
     from rsart.extras import require
 
-    try:
+    def work() -> int:
         require("pd2gs", f"pd2gs {args.cmd}")  # a missing extra is an RsartError like the others
         return {"train": _train, "render": _render, "eval": _eval, "run": _run}[args.cmd](args)
-    except RsartError as e:
-        print(f"pd2gs: error: {e}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("pd2gs: interrupted (finished work is kept; resume: train --resume, run: the same command)",
-              file=sys.stderr)
-        return 130
+
+    return guarded(work, "pd2gs",
+                   "interrupted (finished work is kept; resume: train --resume, run: the same command)")
 
 
 if __name__ == "__main__":

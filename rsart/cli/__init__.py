@@ -1,8 +1,9 @@
 """The ``rsart`` command line: one entry point, one module per subcommand.
 
 Each module in :data:`COMMANDS` exposes ``register(subparsers)``, which adds its subparser and
-sets ``func`` (called with the parsed args; returns an exit code). Errors rsart raises on
-purpose (:class:`rsart.errors.RsartError`) are printed without a traceback and exit 2.
+sets ``func`` (called with the parsed args; returns an exit code). :func:`rsart.errors.guarded` ends every
+rsart-family console script: errors rsart raises on purpose (:class:`rsart.errors.RsartError`) are
+printed without a traceback and exit 2; a bug is one line and exit 1 (``RSART_DEBUG=1``: the traceback).
 """
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ import argparse
 import importlib
 import sys
 
-from ..errors import RsartError
+from ..errors import guarded
 
 #: Subcommand modules (in --help order). A module that fails to import is reported, not fatal.
 COMMANDS = [
@@ -69,23 +70,8 @@ def _register_plugins(sub) -> None:
 
 
 def run(func, args) -> int:
-    """Call a subcommand, turning rsart errors into a message and exit code 2 (no traceback)."""
-    try:
-        return int(func(args) or 0)
-    except RsartError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
-    except ImportError as e:  # a module of a missing extra: one line naming `pip install 'rsart[X]'`
-        from ..extras import from_import_error
-
-        err = from_import_error(e)
-        if err is None:
-            raise
-        print(f"error: {err}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
-        return 130
+    """Call a subcommand ``func(args)`` under :func:`guarded`."""
+    return guarded(lambda: func(args))
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -10,11 +10,10 @@ with its JSON path, no traceback); 1 an unexpected internal error.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 
-from ..errors import Problem, RsartError
+from ..errors import Problem, RsartError, guarded
 
 DESCRIPTION = """\
 Score an articulated-object reconstruction submission (rsart-submission/1, docs/evaluation.md §1) against the
@@ -236,27 +235,7 @@ def run(args) -> int:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    try:
-        return run(args)
-    except RsartError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
-        return 130
-    except ImportError as e:  # a module of a missing extra: one line naming `pip install 'rsart[X]'`
-        from ..extras import from_import_error
-
-        if (err := from_import_error(e)) is None:
-            raise
-        print(f"error: {err}", file=sys.stderr)
-        return 2
-    except Exception as e:  # an internal bug: one line unless RSART_DEBUG asks for the traceback
-        if os.environ.get("RSART_DEBUG"):
-            raise
-        print(f"internal error (please report; set RSART_DEBUG=1 for the traceback): {type(e).__name__}: {e}",
-              file=sys.stderr)
-        return 1
+    return guarded(lambda: run(args))
 
 
 if __name__ == "__main__":
