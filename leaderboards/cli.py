@@ -10,7 +10,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from rsart.errors import RsartError, guarded
+from rsart.console import guarded
+from rsart.errors import RsartError
 
 DB_HELP = "result store: a SQLAlchemy URL (e.g. postgresql://user@host/db) or a SQLite file path"
 

@@ -19,7 +19,8 @@ from pathlib import Path
 
 import pd2gs  # noqa: F401  (sets OMP_WAIT_POLICY before torch loads)
 from pd2gs.config_cli import add_option, overrides, value
-from rsart.errors import RsartError, guarded
+from rsart.console import guarded
+from rsart.errors import RsartError
 
 
 class UsageError(RsartError):
@@ -236,7 +237,7 @@ def _run(args) -> int:
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``pd2gs`` console script. Every error pd2gs raises on purpose is an
     :class:`~rsart.errors.RsartError`: printed here without a traceback, exit status 2; a bug is one line,
-    exit status 1 (:func:`rsart.errors.guarded`)."""
+    exit status 1 (:func:`rsart.console.guarded`)."""
     args = _parser().parse_args(argv)  # --help stays fast: torch loads only for a command
     from rsart.extras import require
 

@@ -9,16 +9,11 @@ file names), so control characters in them (newline, NUL, escape sequences, ...)
 (``\\n``, ``\\x00``) by :func:`escape_controls` when an error is turned into text; a message can then
 never forge extra lines or terminal codes. One problem is said on one line
 (``FILE: path: problem``); several as a count followed by one ``- path: problem`` line each.
-
-:func:`guarded` is how every console script of the family ends (exit 2 for these errors, 1 for a bug).
 """
 from __future__ import annotations
 
-import os
 import re
-import sys
 from dataclasses import dataclass
-from typing import Callable
 
 # C0 and C1 control characters, DEL, and the Unicode line/paragraph separators
 _CONTROLS = re.compile("[\x00-\x1f\x7f-\x9f\u2028\u2029]")
@@ -98,31 +93,3 @@ class Problems:
     def raise_if_any(self, source: str | None = None) -> None:
         if self.items:
             raise ValidationError(self.items, source)
-
-
-def guarded(call: Callable[[], int | None], prog: str = "", interrupted: str = "interrupted") -> int:
-    """Run a console script's work and end it the way every rsart-family command ends (``rsart``,
-    ``rsart-eval``, ``pd2gs``, ``rsart-leaderboard``): the exit status of ``call()`` (None = 0); an
-    :class:`~rsart.errors.RsartError` or a missing extra -> ``[prog: ]error: ...`` on stderr, exit 2;
-    Ctrl-C -> ``interrupted``, exit 130; any other exception (a bug) -> one line naming it, exit 1, with the
-    traceback only when ``RSART_DEBUG`` is set."""
-    lead = f"{prog}: " if prog else ""
-    try:
-        return int(call() or 0)
-    except RsartError as e:
-        print(f"{lead}error: {e}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print(f"{lead}{interrupted}", file=sys.stderr)
-        return 130
-    except Exception as e:
-        from .extras import from_import_error
-
-        if (err := from_import_error(e)) is not None:  # a module of a missing extra: `pip install 'rsart[X]'`
-            print(f"{lead}error: {err}", file=sys.stderr)
-            return 2
-        if os.environ.get("RSART_DEBUG"):
-            raise
-        print(f"{lead}internal error (please report; set RSART_DEBUG=1 for the traceback): "
-              f"{type(e).__name__}: {escape_controls(str(e))}", file=sys.stderr)
-        return 1

@@ -1,7 +1,7 @@
 """The ``rsart`` command line: one entry point, one module per subcommand.
 
 Each module in :data:`COMMANDS` exposes ``register(subparsers)``, which adds its subparser and
-sets ``func`` (called with the parsed args; returns an exit code). :func:`rsart.errors.guarded` ends every
+sets ``func`` (called with the parsed args; returns an exit code). :func:`rsart.console.guarded` ends every
 rsart-family console script: errors rsart raises on purpose (:class:`rsart.errors.RsartError`) are
 printed without a traceback and exit 2; a bug is one line and exit 1 (``RSART_DEBUG=1``: the traceback).
 """
@@ -11,7 +11,7 @@ import argparse
 import importlib
 import sys
 
-from ..errors import guarded
+from ..console import guarded
 
 #: Subcommand modules (in --help order). A module that fails to import is reported, not fatal.
 COMMANDS = [

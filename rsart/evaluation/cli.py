@@ -13,7 +13,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from ..errors import Problem, RsartError, guarded
+from ..console import guarded
+from ..errors import Problem, RsartError
 
 DESCRIPTION = """\
 Score an articulated-object reconstruction submission (rsart-submission/1, docs/evaluation.md §1) against the

@@ -1,8 +1,9 @@
-"""rsart.errors.guarded: the one way every console script of the family (rsart, rsart-eval, pd2gs,
+"""rsart.console.guarded: the one way every console script of the family (rsart, rsart-eval, pd2gs,
 rsart-leaderboard) ends -- exit codes and one-line messages, no traceback unless RSART_DEBUG asks."""
 import pytest
 
-from rsart.errors import RsartError, guarded
+from rsart.console import guarded
+from rsart.errors import RsartError
 
 pytestmark = pytest.mark.core
 
