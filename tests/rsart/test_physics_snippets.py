@@ -1,4 +1,4 @@
-"""The MuJoCo and PyBullet snippets of docs/convert.md, run as written, pose parts as rsart does."""
+"""The MuJoCo, PyBullet and SAPIEN snippets of docs/convert.md, run as written, pose parts as rsart does."""
 from __future__ import annotations
 
 import re
@@ -93,3 +93,20 @@ def test_pybullet_snippet(pm_object):
         frames[state] = fr
         pybullet.disconnect(client)
     _check(frames["m0"], frames["m3"], _expected_part_frames(obj, "m3"))
+
+
+def test_sapien_snippet(pm_object):
+    pytest.importorskip("sapien", reason="sapien is not installed (pip install sapien==3.0.3)")
+    import rsart
+    from scipy.spatial.transform import Rotation
+
+    obj = rsart.load(pm_object)
+    frames = {}
+    for state in ("m0", "m3"):
+        ns = _run("sapien", pm_object, state)
+        links = {link.name: link for link in ns["art"].get_links()}
+        frames[state] = {j.name: (Rotation.from_quat(links[obj.parts[j.child].name].entity_pose.q, scalar_first=True)
+                                  .as_matrix(), np.array(links[obj.parts[j.child].name].entity_pose.p, dtype=float))
+                         for j in obj.joints}
+    _check(frames["m0"], frames["m3"], _expected_part_frames(obj, "m3"))
+
