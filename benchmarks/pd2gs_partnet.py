@@ -383,8 +383,9 @@ def report(recs: list[dict], s: dict, timing: dict, prep: dict, ablation_rows: d
               + "; ".join(f"{c} Axis Ang {a0}/{a1}°, CD-s {cs}, CD-w {cw}"
                           for c, (a0, a1, cs, cw) in PAPER_CATEGORY.items()) + ".",
               "", "The states: m0..m3 move every joint together over its full URDF range. The boxes' lids "
-              "(100162, 100676) have ±135° limits, so their lids pass through the box walls on the way (at m0 "
-              "100162's lids lie inside the box); continuous joints (101940's knobs, 3763's cap) turn a quarter "
+              "(100162, 100676) have ±135° limits: 100162's lids are closed at m0 (the lower limit), stand open "
+              "at m1–m2 and fold into the box at m3 (docs/images/pm-100162.png; docs/convert.md); continuous "
+              "joints (101940's knobs, 3763's cap) turn a quarter "
               "turn; 3763's cap is a screw (prismatic + revolute folded into one part)."]
     if prep.get("convert_s") or prep.get("render_s"):
         lines += ["", "## Preparation wall time (this run; objects kept from an earlier run are not timed)", "",
