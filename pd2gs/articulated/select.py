@@ -39,7 +39,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import torch
-from torch import nn
 
 from pd2gs.data import Frame
 from pd2gs.kinematics import estimate_joint, prismatic_params, revolute_params, robust_rigid

@@ -104,9 +104,7 @@ def test_sapien_snippet(pm_object):
     frames = {}
     for state in ("m0", "m3"):
         ns = _run("sapien", pm_object, state)
-        links = {link.name: link for link in ns["art"].get_links()}
-        frames[state] = {j.name: (Rotation.from_quat(links[obj.parts[j.child].name].entity_pose.q, scalar_first=True)
-                                  .as_matrix(), np.array(links[obj.parts[j.child].name].entity_pose.p, dtype=float))
-                         for j in obj.joints}
+        poses = {link.name: link.entity_pose for link in ns["art"].get_links()}
+        frames[state] = {j.name: (Rotation.from_quat(poses[obj.parts[j.child].name].q, scalar_first=True).as_matrix(),
+                                  np.array(poses[obj.parts[j.child].name].p, dtype=float)) for j in obj.joints}
     _check(frames["m0"], frames["m3"], _expected_part_frames(obj, "m3"))
-
