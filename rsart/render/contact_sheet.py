@@ -40,7 +40,9 @@ def colour_depth(depth: np.ndarray, lo: float | None = None, hi: float | None = 
 
 def draw_axes(rgb: np.ndarray, camera: Camera, axes: dict[str, tuple[np.ndarray, np.ndarray, str]],
               length: float) -> np.ndarray:
-    """Draw joint axes (name -> (origin (3,), unit axis (3,), type)) of ``length`` world units into ``rgb``."""
+    """Draw joint axes (name -> (origin (3,), unit axis (3,), type)) of ``length`` world units into ``rgb``:
+    a revolute axis as a line centred on its pivot, named beside the pivot (its ends can lie near other
+    joints); a prismatic axis as an arrow from its origin, named at the tip."""
     img = np.ascontiguousarray(rgb[..., :3]).copy()
     thick = max(1, img.shape[1] // 240)
     for name, (o, a, kind) in axes.items():
@@ -53,7 +55,8 @@ def draw_axes(rgb: np.ndarray, camera: Camera, axes: dict[str, tuple[np.ndarray,
             cv2.line(img, p0, p1, (255, 40, 40), thick, cv2.LINE_AA)
         else:
             cv2.arrowedLine(img, p0, p1, (255, 230, 0), thick, cv2.LINE_AA, tipLength=0.15)
-        cv2.putText(img, name, (p1[0] + 4, p1[1]), cv2.FONT_HERSHEY_SIMPLEX, 0.25 * thick, (255, 255, 255),
+        at = tuple(int(round(c)) for c in camera.project(o[None])[0][0]) if kind == "revolute" else p1
+        cv2.putText(img, name, (at[0] + 4, at[1] - 3), cv2.FONT_HERSHEY_SIMPLEX, 0.25 * thick, (255, 255, 255),
                     max(1, thick // 2), cv2.LINE_AA)
     return img
 

@@ -125,3 +125,28 @@ def test_suite_root_is_rendered_in_place(tmp_path):
     (tmp_path / "junk").mkdir()
     (tmp_path / "junk" / "x.txt").write_text("x")
     assert main(["--suite", "rsart-synth", "--out", str(tmp_path / "junk"), *SMALL]) == 2
+
+
+def test_axis_labels_sit_at_the_pivot_of_a_revolute_axis_and_the_tip_of_a_prismatic_one():
+    """A hinge's name goes beside its pivot (the line's ends can lie near other joints: a lamp's
+    shoulder line reaches its wrist); a slide's name goes at its arrow's tip."""
+    from rsart.camera import Camera, Intrinsics, look_at
+    from rsart.render.contact_sheet import draw_axes
+
+    cam = Camera(Intrinsics(640, 480, 600.0, 600.0, 319.5, 239.5), look_at(np.array([0.0, -2.0, 0.0]), np.zeros(3)))
+    black = np.zeros((480, 640, 3), np.uint8)
+    o, a = np.zeros(3), np.array([1.0, 0.0, 0.0])
+    centre = cam.project(o[None])[0][0]
+    tip = cam.project((o + 0.8 * a)[None])[0][0]
+
+    def text_near(img, uv, r=14):  # white text pixels (the axis is drawn in red or yellow) near uv
+        x, y = int(round(uv[0])), int(round(uv[1]))
+        win = img[max(0, y - r):y + r, max(0, x):x + 5 * r]
+        return int((win.min(axis=2) > 150).sum())
+
+    hinge = draw_axes(black, cam, {"hinge": (o, a, "revolute")}, 0.8)
+    assert text_near(hinge, centre) > 5
+    assert text_near(hinge, cam.project((o + 0.4 * a)[None])[0][0]) == 0
+    slide = draw_axes(black, cam, {"slide": (o, a, "prismatic")}, 0.8)
+    assert text_near(slide, tip) > 5
+    assert text_near(slide, centre) == 0
