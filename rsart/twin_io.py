@@ -14,6 +14,7 @@ from typing import Any
 
 import trimesh
 
+from .atlas import merge_visuals
 from .errors import RsartError
 from .format import FORMAT, ObjectMeta, State, read_meta, write_meta
 from .io import atomic_dir, atomic_write_bytes, resolve_inside
@@ -32,7 +33,7 @@ def _export_visual(part: TwinPart, folder: Path) -> str | None:
     meshes = [m for m in part.render_meshes() if len(m.faces)]
     if not meshes:
         return None
-    mesh = meshes[0].copy() if len(meshes) == 1 else trimesh.util.concatenate([m.copy() for m in meshes])
+    mesh = meshes[0].copy() if len(meshes) == 1 else merge_visuals(meshes)
     mat = getattr(mesh.visual, "material", None)
     if mat is not None:
         mat.name = part.name

@@ -267,9 +267,11 @@ class Albedo:
     def of(mesh: trimesh.Trimesh) -> "Albedo":
         vis = mesh.visual
         faces = np.asarray(mesh.faces)
-        if getattr(vis, "kind", None) == "texture" and getattr(vis, "uv", None) is not None:
+        if getattr(vis, "kind", None) == "texture":  # without UVs only the material's colour applies (as in GL)
             mat = vis.material
             img = getattr(mat, "image", None) or getattr(mat, "baseColorTexture", None)
+            if getattr(vis, "uv", None) is None:
+                img = None
             factor = getattr(mat, "baseColorFactor", None)
             if factor is None:
                 factor = getattr(mat, "diffuse", None)

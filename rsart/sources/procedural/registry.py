@@ -19,7 +19,7 @@ from .builder import ObjectBuilder
 from .catalogue import CATALOGUE
 
 GENERATOR = "rsart.sources.procedural"
-VERSION = "1"
+VERSION = "2"
 
 
 @dataclass(frozen=True)
