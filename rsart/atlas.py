@@ -19,12 +19,28 @@ PAD = 2  # px of edge-replicated border around each texture in the atlas (no ble
 WHITE = np.array([255, 255, 255, 255], dtype=np.uint8)
 
 
-def _factor(mat) -> np.ndarray:
-    """(4,) float colour factor of a trimesh material in [0, 1] (PBR base colour factor or diffuse)."""
+def material_factor(mat) -> np.ndarray:
+    """(4,) RGBA colour factor of a trimesh material in [0, 1]: its PBR base colour factor or its diffuse
+    (uint8 0-255, or floats in [0, 1]); white when it has neither."""
     f = getattr(mat, "baseColorFactor", None)
     if f is None:
         f = getattr(mat, "diffuse", None)
-    return np.ones(4) if f is None else np.resize(np.asarray(f, dtype=np.float64), 4) / 255.0
+    if f is None:
+        return np.ones(4)
+    raw = np.asarray(f)
+    vals = raw.astype(np.float64).reshape(-1)[:4]
+    out = np.ones(4)  # a missing alpha is opaque
+    out[:len(vals)] = vals / (255.0 if raw.dtype == np.uint8 or vals.max() > 1.0 else 1.0)
+    return out
+
+
+def material_image(visual):
+    """The texture image (PIL) a texture-kind ``visual`` samples, or None: none without UVs (GL then draws
+    the material's colour alone)."""
+    mat = getattr(visual, "material", None)
+    if mat is None or getattr(visual, "uv", None) is None:
+        return None
+    return getattr(mat, "image", None) or getattr(mat, "baseColorTexture", None)
 
 
 def colour_texture(mesh: trimesh.Trimesh, face_rgba: np.ndarray) -> tuple[trimesh.Trimesh, np.ndarray, np.ndarray]:
@@ -55,11 +71,9 @@ def as_texture(mesh: trimesh.Trimesh, max_side: int = MAX_TILED_SIDE) -> tuple[t
         return colour_texture(mesh, np.round(vc[mesh.faces].mean(axis=1)).astype(np.uint8))
     if kind != "texture":  # no colour at all: trimesh's default grey
         return colour_texture(mesh, np.tile(np.array([102, 102, 102, 255], np.uint8), (len(mesh.faces), 1)))
-    mat = vis.material
-    f = _factor(mat)
-    img = getattr(mat, "image", None) or getattr(mat, "baseColorTexture", None)
-    uv = getattr(vis, "uv", None)
-    if uv is None or len(uv) != len(mesh.vertices) or img is None:
+    f = material_factor(vis.material)
+    img, uv = material_image(vis), getattr(vis, "uv", None)
+    if img is None or len(uv) != len(mesh.vertices):
         return colour_texture(mesh, np.tile(np.round(f * 255).astype(np.uint8), (len(mesh.faces), 1)))
     rgba = np.asarray(img.convert("RGBA"), dtype=np.float64) * f
     uv = np.asarray(uv, dtype=np.float64)
@@ -91,7 +105,7 @@ def merge_visuals(meshes: list[trimesh.Trimesh], max_side: int = MAX_ATLAS_SIDE)
     Identical textures share one place in the atlas; an atlas over ``max_side`` px on a side is made by
     scaling every texture down by the same factor (UVs are relative to each texture, so they still hold)."""
     parts = [as_texture(m) for m in meshes]
-    slots: dict[bytes, int] = {}
+    slots: dict[tuple, int] = {}  # (h, w, hash of the texels) -> index in images
     images: list[np.ndarray] = []
     slot_of = []
     for _, _, img in parts:

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 
+from ..atlas import material_factor, material_image
 from ..camera import Camera
 from .raycast import RayHits
 
@@ -268,15 +269,7 @@ class Albedo:
         vis = mesh.visual
         faces = np.asarray(mesh.faces)
         if getattr(vis, "kind", None) == "texture":  # without UVs only the material's colour applies (as in GL)
-            mat = vis.material
-            img = getattr(mat, "image", None) or getattr(mat, "baseColorTexture", None)
-            if getattr(vis, "uv", None) is None:
-                img = None
-            factor = getattr(mat, "baseColorFactor", None)
-            if factor is None:
-                factor = getattr(mat, "diffuse", None)
-            f = np.ones(3) if factor is None else np.asarray(factor, dtype=np.float64)[:3] / (
-                255.0 if np.asarray(factor).dtype == np.uint8 or np.max(factor) > 1 else 1.0)
+            img, f = material_image(vis), material_factor(vis.material)[:3]
             if img is not None:
                 tex = np.asarray(img.convert("RGB"), dtype=np.uint8)
                 return Albedo(faces, uv=np.asarray(vis.uv, dtype=np.float64), texture=tex, factor=f)
