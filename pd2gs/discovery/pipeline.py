@@ -34,6 +34,7 @@ from pd2gs.articulated.fit import FitConfig, evaluate_views, fit_articulated
 from pd2gs.articulated.model import ArticulatedGaussians
 from pd2gs.articulated.search import SearchConfig, search_joints
 from pd2gs.articulated.select import SelectConfig, select_model
+from pd2gs.articulated.surfaces import SurfaceViews, field_surfaces, search_surfaces
 from pd2gs.data import Frame
 from pd2gs.kinematics import JointFit, estimate_joint
 from rsart.camera import Camera
@@ -261,6 +262,18 @@ def search(d: Discovery) -> None:
                         "held_out": res.held_out, "kept": res.kept}
 
 
+def surface_search(d: Discovery) -> None:
+    """Each body's joint chosen against the object's surface in every state, as stage 1's field renders it
+    (:mod:`pd2gs.articulated.surfaces`); ownership is left to the fit."""
+    t0 = time.perf_counter()
+    f = d.fld
+    gaussians = [{"means": f.means[k], "quats": f.quats[k], "scales": f.scales[k], "colors": f.colors,
+                  "opacities": f.opacities} for k in range(f.k)]
+    surfaces = SurfaceViews(field_surfaces(gaussians, d.frames, backend=d.cfg.render_backend))
+    res = search_surfaces(d.model, surfaces, d.ref_index, SearchConfig())
+    d.diag["surface"] = {"seconds": time.perf_counter() - t0, "bodies": res.chosen}
+
+
 def fit(d: Discovery) -> None:
     """Geometry, ownership and joints fitted together on every training view of every state."""
     res = fit_articulated(d.model, d.frames, d.masks, fit_config(d, d.cfg.fit_iters))
@@ -356,12 +369,15 @@ def articulated_parts(d: Discovery) -> None:
             if start == "search":
                 search(run)
                 note["search_kept"] = run.diag["search"]["kept"]
-            if not note.get("search_kept") and plain is not None:
+            elif start == "surface":
+                surface_search(run)
+            changed = start == "surface" or note.get("search_kept", False)
+            if not changed and plain is not None:
                 # a search that kept nothing restored the initial model bitwise: its fit would repeat this one
                 runs.append((start, runs[plain][1], {**note, "fit_of": plain}))
                 continue
             articulated_fit(run)
-            if not note.get("search_kept"):
+            if not changed:
                 plain = len(runs)
             runs.append((start, run, note))
     chosen = min(range(len(runs)), key=lambda i: runs[i][1].diag["test_l1"])
