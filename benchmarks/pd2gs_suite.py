@@ -43,8 +43,8 @@ ABLATIONS = {  # name -> DiscoveryConfig overrides (same trained field)
     "no-silhouette": {"fit_silhouette": 0.0},  # RGB only
     "2-states": {"n_states": 2},  # start and end states only
     "given-count": {"counter": "given"},  # the true part count (meta.json)
-    "no-surface": {"starts": "kabsch,search"},  # without the surface start (the default until 2026-11-27)
-    "given-no-surface": {"counter": "given", "starts": "kabsch,search"},
+    "surface": {"starts": "kabsch,search,surface"},  # + the search on stage 1's rendered surfaces (opt-in)
+    "given-surface": {"counter": "given", "starts": "kabsch,search,surface"},
     "no-select": {"select": False},  # the initial count, tree and types
     "search": {"starts": "search"},  # from the coarse joint and ownership search's joints only
     "depth": {"fit_depth": 1.0},  # + an L1 depth loss (its own track: the submission's inputs name depth)

@@ -252,8 +252,10 @@ def _best(body: _Body, kind: str, hyps: list[tuple[np.ndarray, np.ndarray, np.nd
 
 def search_body(model: ArticulatedGaussians, b: int, views: ConsistencyViews, ramp: np.ndarray,
                 cfg: SearchConfig) -> tuple[float, float, Hypothesis]:
-    """Body b's best joint by the consistency score -> (current joint's score, best score, best hypothesis);
-    the current joint is returned when nothing scores lower. See the module doc for the hypotheses."""
+    """Body b's best joint by the score of ``views`` (anything with ``cost(X (H, S, M, 3), colors (M, 3)) ->
+    (H, M)``: :class:`ConsistencyViews`, or :class:`.surfaces.SurfaceViews`) -> (current joint's score, best
+    score, best hypothesis); the current joint is returned when nothing scores lower. See the module doc
+    for the hypotheses."""
     j = b - 1
     body = _Body(model, b, views, cfg, pose_costs(model, views))
     cur: Hypothesis = (model.joint_types[j], model.unit_axes[j].detach().double().numpy(),

@@ -164,14 +164,15 @@ class DiscoveryConfig:
     """RANSAC iterations of the rigid fit."""
 
     # --- the articulated model (mode "articulated"; pd2gs/articulated/)
-    starts: str = "kabsch,search,surface"
+    starts: str = "kabsch,search"
     """the first joints the articulated fit starts from, a comma list: ``kabsch`` (stage 1's Kabsch joints
     on its motion clusters), ``search`` (those after the coarse joint and ownership search by projection,
     pd2gs/articulated/search.py) and ``surface`` (each body's joint searched against the surfaces stage 1's
     field renders in each state, pd2gs/articulated/surfaces.py). Each start (times ``restarts``) is
-    discovered to the end and the model with the lowest held-out L1 kept: where one start's joints are poor
-    another's render the held-out views better. All three by default: with the true part count on 15
-    rsart-synth fields, mean Axis Ang 7.7° against 13.8° from ``kabsch,search`` (docs/pd2gs-parts.md)."""
+    discovered to the end and the model with the lowest held-out L1 kept. ``surface`` is opt-in: on 15
+    rsart-synth fields it lowers the penalised mean Axis Ang (true count: 23.4° -> 17.3°; counted: 17.2° ->
+    14.2°) but with the counted part count it keeps spurious bodies (count 57 % -> 43 %), and discovery
+    takes 1.6x as long (docs/pd2gs-parts.md)."""
     fit_iters: int = 600
     """Adam steps of the articulated fit (one random training view per step)."""
     fit_max_side: int = 120
