@@ -171,7 +171,7 @@ class DiscoveryConfig:
     field renders in each state, pd2gs/articulated/surfaces.py). Each start (times ``restarts``) is
     discovered to the end and the model with the lowest held-out L1 kept. ``surface`` is opt-in: on 15
     rsart-synth fields it lowers the penalised mean Axis Ang (true count: 23.4° -> 17.3°; counted: 17.2° ->
-    14.2°) but with the counted part count it keeps spurious bodies (count 57 % -> 43 %), and discovery
+    14.2°) but with the counted part count it keeps spurious bodies (count accuracy 0.57 -> 0.43), and discovery
     takes 1.6x as long (docs/pd2gs-parts.md)."""
     fit_iters: int = 600
     """Adam steps of the articulated fit (one random training view per step)."""
