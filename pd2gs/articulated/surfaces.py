@@ -29,6 +29,7 @@ model selection, it renders the held-out views better.
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 
@@ -36,10 +37,11 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from pd2gs.data import Frame
+from pd2gs.data import Frame, backproject_frames
 
 from .model import ArticulatedGaussians
 from .ownership import view_subset
+from .search import SearchConfig, _ramp, _set_joint, search_body
 
 
 def field_surfaces(gaussians: list[dict], frames: list[Frame], per_state: int = 16, alpha_min: float = 0.5,
@@ -50,7 +52,7 @@ def field_surfaces(gaussians: list[dict], frames: list[Frame], per_state: int = 
     colors (N, 3), opacities (N,)). ``frames``: views whose ``state`` indexes ``gaussians``. Up to
     ``per_state`` of each state's ``train`` views are used, spread evenly. A pixel counts where the
     rendered alpha exceeds ``alpha_min``; its point lies at the rendered expected depth along the
-    pixel's ray (OpenCV pixel centres)."""
+    pixel's ray (back-projected by :func:`pd2gs.data.backproject_frames`)."""
     from pd2gs.render import rasterize
 
     def t(x):
@@ -59,22 +61,17 @@ def field_surfaces(gaussians: list[dict], frames: list[Frame], per_state: int = 
     out = []
     for s, g in enumerate(gaussians):
         own = [f for f in frames if f.state == s]
-        pts = []
         args = [t(g[k]) for k in ("means", "quats", "scales", "colors")] + [t(g["opacities"]).reshape(-1)]
+        rendered = []
         for i in view_subset(own, "train", per_state):
             f = own[i]
-            w, h = f.size
             with torch.no_grad():
-                r = rasterize(*args, t(f.K), t(f.w2c), w, h, backend=backend)
-            yy, xx = np.nonzero(r.alpha.numpy() > alpha_min)
-            z = r.depth.numpy()[yy, xx]
-            K = f.K.double().numpy()
-            cam = np.stack([(xx - K[0, 2]) / K[0, 0] * z, (yy - K[1, 2]) / K[1, 1] * z, z], 1)
-            c2w = np.linalg.inv(f.w2c.double().numpy())
-            pts.append(cam @ c2w[:3, :3].T + c2w[:3, 3])
-        if not pts:
+                r = rasterize(*args, t(f.K), t(f.w2c), *f.size, backend=backend)
+            depth = torch.where(r.alpha > alpha_min, r.depth, torch.zeros_like(r.depth))
+            rendered.append(Frame(r.rgb, depth, t(f.K), t(f.w2c), s, "train", f.view_id))
+        if not rendered:
             raise ValueError(f"frames: state {s} has no 'train' view to render its surface from")
-        out.append(np.concatenate(pts))
+        out.append(backproject_frames(rendered, max_points=10 ** 9)[0].double().numpy())
     return out
 
 
@@ -130,10 +127,6 @@ def search_surfaces(model: ArticulatedGaussians, surfaces: SurfaceViews, ref: in
                     ) -> SurfaceSearchResult:
     """Every movable body's joint chosen on ``surfaces`` (see the module doc), in place; ownership unchanged.
     ``cfg``: a :class:`.search.SearchConfig` (its hypothesis grid; ``min_explained`` is not applied)."""
-    import dataclasses
-
-    from .search import SearchConfig, _ramp, _set_joint, search_body
-
     t0 = time.perf_counter()
     cfg = dataclasses.replace(cfg or SearchConfig(), min_explained=0.0)
     ramp = np.asarray(cfg.ramp, dtype=np.float64) if cfg.ramp is not None else _ramp(model.num_states, ref)

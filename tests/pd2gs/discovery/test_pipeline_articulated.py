@@ -129,9 +129,9 @@ def test_articulated_discovery_end_to_end_scores(data, tmp_path):
                      f"Axis Ang {m['axis_ang']:.1f}°, Part Motion {m['part_motion_rev']:.1f}°")
 
 
-def test_the_search_step_records_its_choice_and_keeps_a_near_exact_start_near(data):
-    """Discovery's ``search`` step on the cabinet's near-exact field: the Kabsch start is already within a
-    degree, and the search (here checked on held-out views) must not lead it away."""
+def initialised_cabinet(data, starts: str):
+    """The cabinet's near-exact field (2000 Gaussians, 2 mm jitter) through stage1, training_views and
+    initialise, at 64 px, one thread."""
     from pd2gs.discovery import pipeline as P
 
     torch.set_num_threads(1)
@@ -139,9 +139,19 @@ def test_the_search_step_records_its_choice_and_keeps_a_near_exact_start_near(da
     fld, _ = perfect_field(obj.twin, obj.meta, STATES, n=2000, jitter=0.002)
     fld = coloured(fld, obj)
     bg = tuple(float(c) for c in obj.states["m0"].views[0].rgb[0, 0] / 255.0)
-    d = P.stage1(fld, obj, DiscoveryConfig(fit_max_side=64, background=bg, starts="search"))
+    d = P.stage1(fld, obj, DiscoveryConfig(fit_max_side=64, background=bg, starts=starts))
     d.frames, d.masks = P.training_views(d.obj, d.states, d.cfg)
     P.initialise(d)
+    return d
+
+
+def test_the_search_step_records_its_choice_and_keeps_a_near_exact_start_near(data):
+    """Discovery's ``search`` step on the cabinet's near-exact field: the Kabsch start is already within a
+    degree, and the search (here checked on held-out views) must not lead it away."""
+    from pd2gs.discovery import pipeline as P
+
+    d = initialised_cabinet(data, "search")
+    obj = d.obj
     P.search(d)
     s = d.diag["search"]
     assert s["seconds"] > 0 and set(s["bodies"]) == set(range(1, d.model.num_bodies)) and len(s["moved"]) == 2
@@ -166,14 +176,7 @@ def test_the_surface_step_records_a_joint_per_body_that_fits_the_rendered_surfac
     tests/pd2gs/articulated/test_surfaces.py)."""
     from pd2gs.discovery import pipeline as P
 
-    torch.set_num_threads(1)
-    obj = rsart.load(data / "cabinet-0000")
-    fld, _ = perfect_field(obj.twin, obj.meta, STATES, n=2000, jitter=0.002)
-    fld = coloured(fld, obj)
-    bg = tuple(float(c) for c in obj.states["m0"].views[0].rgb[0, 0] / 255.0)
-    d = P.stage1(fld, obj, DiscoveryConfig(fit_max_side=64, background=bg, starts="surface"))
-    d.frames, d.masks = P.training_views(d.obj, d.states, d.cfg)
-    P.initialise(d)
+    d = initialised_cabinet(data, "surface")
     labels = d.model.labels().clone()
     P.surface_search(d)
     s = d.diag["surface"]
