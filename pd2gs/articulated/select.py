@@ -3,12 +3,15 @@
 Instead of thresholds, candidate edits of a fitted model are scored on the held-out (``test``) views of
 every state with a complexity penalty:
 
-    score = L1_heldout + penalty x C        (L1 mean per pixel and channel; C = :func:`complexity`: 1 per
-                                             movable body, 2 for a revolute one)
+    score = L_heldout + penalty x C         (L = L1 mean per pixel and channel + the fit's silhouette weight x
+                                             mean |alpha - mask| where masks are given; C = :func:`complexity`:
+                                             1 per movable body, 2 for a revolute one)
 
-so an extra body must lower the held-out colour error by more than ``penalty`` (twice that for a hinge)
-to stay, and a hinge must render better than a slide by ``penalty`` to stay a hinge. The penalty is
-relative by default: ``penalty_rel`` (2 %) of the incumbent's held-out L1 after its first re-fit (at least
+so an extra body must lower the held-out loss by more than ``penalty`` (twice that for a hinge)
+to stay, and a hinge must render better than a slide by ``penalty`` to stay a hinge. The held-out loss is
+the fit's own objective less SSIM (:func:`~.fit.evaluate_views`): a part that differs from the background
+only in shape, a white door before a white backdrop, is judged by its silhouette as it was fitted. The
+penalty is relative by default: ``penalty_rel`` (2 %) of the incumbent's held-out loss after its first re-fit (at least
 ``penalty_min``, 1e-4), so it
 scales with what the images leave unexplained rather than with the image size (an absolute 1e-3, a quarter
 of an 8-bit level per pixel, measured: it pruned both handles of faucet-0000, whose pixels move the mean
@@ -234,10 +237,13 @@ def complexity(model: ArticulatedGaussians) -> int:
     return sum(2 if t == "revolute" else 1 for t in model.joint_types)
 
 
-def score(model: ArticulatedGaussians, frames: list[Frame], cfg: SelectConfig) -> float:
-    """Penalised held-out loss of a (fitted) model: held-out L1 + penalty x :func:`complexity`."""
+def score(model: ArticulatedGaussians, frames: list[Frame], masks, cfg: SelectConfig) -> float:
+    """Penalised held-out loss of a (fitted) model: the held-out loss of :func:`~.fit.evaluate_views` (L1,
+    plus the silhouette term at the re-fit's weight where ``masks`` are given) + penalty x
+    :func:`complexity`."""
     f = cfg.refit
-    return evaluate_views(model, frames, "test", f.background, f.backend) + cfg.penalty * complexity(model)
+    return (evaluate_views(model, frames, "test", f.background, f.backend, masks, f.silhouette)
+            + cfg.penalty * complexity(model))
 
 
 def select_model(model: ArticulatedGaussians, frames: list[Frame], masks=None, cfg: SelectConfig | None = None,
@@ -249,24 +255,25 @@ def select_model(model: ArticulatedGaussians, frames: list[Frame], masks=None, c
     if not any(f.split == "test" for f in frames):
         raise ValueError("frames: model selection needs held-out views (split 'test'); none given")
     ref = cfg.refit.ref_state or 0
-    screen = frames
+    screen, screen_masks = frames, masks
     if cfg.screen_views is not None:
         held = view_subset(frames, "test", cfg.screen_views * len({f.state for f in frames}))
         screen = [frames[i] for i in held]
+        screen_masks = None if masks is None else [masks[i] for i in held]
     best = copy.deepcopy(model)
     fit_articulated(best, frames, masks, cfg.refit)
     if cfg.penalty is None:
-        l1 = evaluate_views(best, frames, "test", cfg.refit.background, cfg.refit.backend)
+        l1 = evaluate_views(best, frames, "test", cfg.refit.background, cfg.refit.backend, masks, cfg.refit.silhouette)
         cfg = dataclasses.replace(cfg, penalty=max(cfg.penalty_min, cfg.penalty_rel * l1))
     if cfg.min_gain is None:
         cfg = dataclasses.replace(cfg, min_gain=0.5 * cfg.penalty)
-    best_score = score(best, frames, cfg)
+    best_score = score(best, frames, masks, cfg)
     sel = Selection(best, best_score, [{"edit": "start", "bodies": best.num_bodies, "score": best_score,
                                         "penalty": cfg.penalty}])
     for _ in range(cfg.max_rounds):
         cands = candidates(best, ref, trajectories)
         if cfg.refit_top is not None and len(cands) > cfg.refit_top:
-            screened = sorted(((score(c, screen, cfg), i) for i, (_, c) in enumerate(cands)))
+            screened = sorted(((score(c, screen, screen_masks, cfg), i) for i, (_, c) in enumerate(cands)))
             for sc, i in screened:
                 sel.log.append({**cands[i][0], "screen": sc})
             cands = [cands[i] for _, i in screened[: cfg.refit_top]]
@@ -300,16 +307,16 @@ def _round(best: ArticulatedGaussians, best_score: float, cands: list[tuple[dict
     # gained 6 % of the held-out L1 from its re-fit alone and doubled that lid's reported motion)
     kept = copy.deepcopy(best)
     fit_articulated(kept, frames, masks, cfg.refit)
-    kept_score = score(kept, frames, cfg)
+    kept_score = score(kept, frames, masks, cfg)
     if kept_score < best_score:
         best, best_score = kept, kept_score
     log.append({"edit": "keep", "score": best_score, "phase": phase})
     trials = []
     for edit, cand in cands:
-        built = score(cand, frames, cfg)
+        built = score(cand, frames, masks, cfg)
         fitted = copy.deepcopy(cand)
         fit_articulated(fitted, frames, masks, cfg.refit)
-        s = score(fitted, frames, cfg)
+        s = score(fitted, frames, masks, cfg)
         # a short re-fit can also make a candidate that was already right worse (single-view Adam steps):
         # the candidate is the better of the two
         trials.append((s, edit, fitted) if s <= built else (built, edit, cand))

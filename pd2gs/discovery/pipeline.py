@@ -352,7 +352,7 @@ def model_joints(model: ArticulatedGaussians, states: list[str], start: str, end
 def articulated_parts(d: Discovery) -> None:
     """Mode "articulated": per start of ``cfg.starts`` and seed (``cfg.restarts``) initialise -> (coarse joint
     search) -> fit -> select -> the posed model's field, labels and joints; the run with the lowest held-out
-    L1 (``diag["test_l1"]``, on the views model selection scores on) is kept, every run's in
+    loss (``diag["test_loss"]``, the one model selection scores: L1 plus the silhouette term) is kept, every run's in
     ``diag["starts"]`` when there was more than one. A search that keeps nothing leaves the initial model
     as it was, so that start shares the Kabsch start's fit instead of repeating it."""
     d.frames, d.masks = training_views(d.obj, d.states, d.cfg)
@@ -380,19 +380,20 @@ def articulated_parts(d: Discovery) -> None:
             if not changed:
                 plain = len(runs)
             runs.append((start, run, note))
-    chosen = min(range(len(runs)), key=lambda i: runs[i][1].diag["test_l1"])
+    chosen = min(range(len(runs)), key=lambda i: runs[i][1].diag["test_loss"])
     best = runs[chosen][1]
     for f in dataclasses.fields(Discovery):
         if f.name != "cfg":
             setattr(d, f.name, getattr(best, f.name))
     if len(runs) > 1:
-        d.diag["starts"] = {"runs": [{"start": s, "seed": r.cfg.seed, "test_l1": r.diag["test_l1"], **note}
+        d.diag["starts"] = {"runs": [{"start": s, "seed": r.cfg.seed, "test_l1": r.diag["test_l1"],
+                                      "test_loss": r.diag["test_loss"], **note}
                                      for s, r, note in runs], "chosen": chosen}
 
 
 def articulated_fit(d: Discovery) -> None:
     """From an initialised (and maybe searched) model: fit -> select -> the posed model's field, labels and
-    joints, and its held-out L1."""
+    joints, and its held-out L1 and loss (L1 + silhouette term: what selection scores)."""
     fit(d)
     if d.cfg.select:
         select(d)
@@ -405,7 +406,9 @@ def articulated_fit(d: Discovery) -> None:
             joints.pop(b, None)
     d.fld.labels = d.labels = labels
     d.joints = joints
-    d.diag["test_l1"] = evaluate_views(d.model, d.frames, "test", fit_config(d, 0).background, d.cfg.render_backend)
+    fc = fit_config(d, 0)
+    d.diag["test_l1"] = evaluate_views(d.model, d.frames, "test", fc.background, fc.backend)
+    d.diag["test_loss"] = evaluate_views(d.model, d.frames, "test", fc.background, fc.backend, d.masks, fc.silhouette)
     d.diag["tree"] = {f"p{b}": (f"p{p}" if p else "static") for b, p in enumerate(d.model.parent) if b in joints}
 
 
