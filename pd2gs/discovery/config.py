@@ -23,7 +23,7 @@ Ablation switches (docs/pd2gs-parts.md has the table):
 * ``select``          — articulated: False keeps the initial part count, tree and types.
 * ``starts``          — articulated: the first joints (stage 1's Kabsch joints, the coarse joint search's,
                         the search on stage 1's rendered surfaces); each is discovered and the lowest
-                        held-out L1 kept.
+                        held-out loss (L1 + silhouette term) kept.
 * ``refine``, ``mask_provider``, ``cluster``, ``split_disconnected`` — paper mode's segmentation.
 * ``joint_rule``      — the Kabsch joints' type rule, "paper" or "bic" (None: the mode's own: "paper" in mode
   "paper", "bic" for the articulated initialisation).
@@ -169,7 +169,8 @@ class DiscoveryConfig:
     on its motion clusters), ``search`` (those after the coarse joint and ownership search by projection,
     pd2gs/articulated/search.py) and ``surface`` (each body's joint searched against the surfaces stage 1's
     field renders in each state, pd2gs/articulated/surfaces.py). Each start (times ``restarts``) is
-    discovered to the end and the model with the lowest held-out L1 kept. ``surface`` is opt-in: on 15
+    discovered to the end and the model with the lowest held-out loss kept (L1, plus the silhouette term at
+    ``fit_silhouette`` where views have masks). ``surface`` is opt-in: on 15
     rsart-synth fields it lowers the penalised mean Axis Ang (true count: 23.4° -> 17.3°; counted: 17.2° ->
     14.2°) but with the counted part count it keeps spurious bodies (count accuracy 0.57 -> 0.43), and discovery
     takes 1.6x as long (docs/pd2gs-parts.md)."""
@@ -188,8 +189,8 @@ class DiscoveryConfig:
     select: bool = True
     """model selection: merge / prune / re-parent / type swap while the penalised held-out loss improves."""
     select_penalty_rel: float = 0.02
-    """cost of one movable body as a fraction of the held-out mean L1 of the model entering selection
-    (pd2gs/articulated/select.py)."""
+    """cost of one movable body as a fraction of the held-out loss (mean L1 + ``fit_silhouette`` x mean
+    |alpha - mask|) of the model entering selection (pd2gs/articulated/select.py)."""
     select_iters: int = 120
     """Adam steps of each candidate's re-fit."""
     select_rounds: int = 6
@@ -198,7 +199,7 @@ class DiscoveryConfig:
     """Adam steps of the fit after selection (0: none)."""
     restarts: int = 1
     """articulated discovery runs from this many seeds (``seed``, ``seed`` + 1, ...); the model with the
-    lowest held-out L1 is kept (model selection over starts: the fit and selection end in different local
+    lowest held-out loss is kept (model selection over starts: the fit and selection end in different local
     optima from one seed to the next)."""
 
     # --- meshing (paper App. A.2)
