@@ -161,6 +161,28 @@ def fit_articulated(model: ArticulatedGaussians, frames: list[Frame], masks: lis
 
 
 @torch.no_grad()
+def view_errors(model: ArticulatedGaussians, frames: list[Frame], split: str = "test", background=(1.0, 1.0, 1.0),
+                backend: str = "cpu", masks: list[torch.Tensor | None] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Per ``split`` frame (one render each) the mean L1 colour error of the model's render and the mean
+    |rendered alpha - mask| (0 where ``masks``, parallel to ``frames``, gives none) -> two (V,) arrays."""
+    if masks is not None and len(masks) != len(frames):
+        raise ValueError(f"masks: {len(masks)} masks for {len(frames)} frames")
+    bg = torch.tensor(background)
+    l1, sil = [], []
+    for i, f in enumerate(frames):
+        if f.split == split:
+            out = model.render(f.state, f.K, f.w2c, *f.size, background=bg, backend=backend)
+            l1.append(float((out.rgb - f.rgb).abs().mean()))
+            m = masks[i] if masks is not None else None
+            sil.append(0.0 if m is None else float((out.alpha - m).abs().mean()))
+    return np.asarray(l1, dtype=np.float64), np.asarray(sil, dtype=np.float64)
+
+
+def held_out_loss(l1: np.ndarray, sil: np.ndarray, silhouette: float) -> float:
+    """Mean over views of L1 + ``silhouette`` x silhouette error (:func:`view_errors`'s arrays; nan if none)."""
+    return float(np.mean(l1 + silhouette * sil)) if len(l1) else float("nan")
+
+
 def evaluate_views(model: ArticulatedGaussians, frames: list[Frame], split: str = "test",
                    background=(1.0, 1.0, 1.0), backend: str = "cpu", masks: list[torch.Tensor | None] | None = None,
                    silhouette: float = 0.0) -> float:
@@ -170,16 +192,4 @@ def evaluate_views(model: ArticulatedGaussians, frames: list[Frame], split: str 
     its SSIM term, so the models that selection compares are judged by what the fit optimised: an RGB-only
     score cannot see a white door against a white background (measured on refrigerator-0000, docs/
     pd2gs-parts.md)."""
-    if masks is not None and len(masks) != len(frames):
-        raise ValueError(f"masks: {len(masks)} masks for {len(frames)} frames")
-    bg = torch.tensor(background)
-    errs = []
-    for i, f in enumerate(frames):
-        if f.split == split:
-            out = model.render(f.state, f.K, f.w2c, *f.size, background=bg, backend=backend)
-            e = float((out.rgb - f.rgb).abs().mean())
-            m = masks[i] if masks is not None and silhouette > 0 else None
-            if m is not None:
-                e += silhouette * float((out.alpha - m).abs().mean())
-            errs.append(e)
-    return float(np.mean(errs)) if errs else float("nan")
+    return held_out_loss(*view_errors(model, frames, split, background, backend, masks), silhouette)

@@ -262,12 +262,12 @@ def select_model(model: ArticulatedGaussians, frames: list[Frame], masks=None, c
         screen_masks = None if masks is None else [masks[i] for i in held]
     best = copy.deepcopy(model)
     fit_articulated(best, frames, masks, cfg.refit)
+    loss = evaluate_views(best, frames, "test", cfg.refit.background, cfg.refit.backend, masks, cfg.refit.silhouette)
     if cfg.penalty is None:
-        l1 = evaluate_views(best, frames, "test", cfg.refit.background, cfg.refit.backend, masks, cfg.refit.silhouette)
-        cfg = dataclasses.replace(cfg, penalty=max(cfg.penalty_min, cfg.penalty_rel * l1))
+        cfg = dataclasses.replace(cfg, penalty=max(cfg.penalty_min, cfg.penalty_rel * loss))
     if cfg.min_gain is None:
         cfg = dataclasses.replace(cfg, min_gain=0.5 * cfg.penalty)
-    best_score = score(best, frames, masks, cfg)
+    best_score = loss + cfg.penalty * complexity(best)  # = score(best, ...), without rendering the views again
     sel = Selection(best, best_score, [{"edit": "start", "bodies": best.num_bodies, "score": best_score,
                                         "penalty": cfg.penalty}])
     for _ in range(cfg.max_rounds):

@@ -30,7 +30,7 @@ import numpy as np
 import torch
 
 import pd2gs
-from pd2gs.articulated.fit import FitConfig, evaluate_views, fit_articulated
+from pd2gs.articulated.fit import FitConfig, fit_articulated, held_out_loss, view_errors
 from pd2gs.articulated.model import ArticulatedGaussians
 from pd2gs.articulated.search import SearchConfig, search_joints
 from pd2gs.articulated.select import SelectConfig, select_model
@@ -407,8 +407,9 @@ def articulated_fit(d: Discovery) -> None:
     d.fld.labels = d.labels = labels
     d.joints = joints
     fc = fit_config(d, 0)
-    d.diag["test_l1"] = evaluate_views(d.model, d.frames, "test", fc.background, fc.backend)
-    d.diag["test_loss"] = evaluate_views(d.model, d.frames, "test", fc.background, fc.backend, d.masks, fc.silhouette)
+    l1, sil = view_errors(d.model, d.frames, "test", fc.background, fc.backend, d.masks)  # one render per view
+    d.diag["test_l1"] = held_out_loss(l1, sil, 0.0)
+    d.diag["test_loss"] = held_out_loss(l1, sil, fc.silhouette)
     d.diag["tree"] = {f"p{b}": (f"p{p}" if p else "static") for b, p in enumerate(d.model.parent) if b in joints}
 
 
