@@ -197,6 +197,14 @@ class DiscoveryConfig:
     """at most this many accepted edits."""
     final_iters: int = 300
     """Adam steps of the fit after selection (0: none)."""
+    polish_iters: int = 600
+    """Adam steps of a last fit of the chosen model (after the choice among starts) on views of at most
+    ``polish_max_side`` px (0: none). The fit and selection run at ``fit_max_side``, where a pixel spans
+    about 0.6 cm of a 0.7 m object. Measured on two rsart-synth fields (docs/pd2gs-experiments.md): a
+    drawer 0.21 -> 0.15 deg, a door 1.34 -> 0.53 deg with its hinge line 31 -> 13 cm off, for about 45 s; it
+    does not repair a joint that is wrong."""
+    polish_max_side: int = 320
+    """the polishing fit's views are at most this large (intrinsics scaled; never above the captured size)."""
     restarts: int = 1
     """articulated discovery runs from this many seeds (``seed``, ``seed`` + 1, ...); the model with the
     lowest held-out loss is kept (model selection over starts: the fit and selection end in different local

@@ -1,5 +1,7 @@
 """The articulated discovery mode's own steps (views, posing, joints) and the mode end to end on the small
 ray-cast cabinet with a 'perfect' field (exact geometry, flat colours the fit must learn)."""
+import dataclasses
+
 import numpy as np
 import pytest
 import torch
@@ -106,7 +108,8 @@ def test_articulated_discovery_end_to_end_scores(data, tmp_path):
     fld, _ = perfect_field(obj.twin, obj.meta, STATES, n=3000, jitter=0.002)
     fld = coloured(fld, obj)
     bg = tuple(float(c) for c in obj.states["m0"].views[0].rgb[0, 0] / 255.0)  # the views' plain background
-    cfg = DiscoveryConfig(fit_iters=300, select_iters=60, final_iters=150, mesh_views=6, fit_max_side=64, background=bg)
+    cfg = DiscoveryConfig(fit_iters=300, select_iters=60, final_iters=150, polish_iters=150, mesh_views=6,
+                          fit_max_side=64, background=bg)
     res = discover(fld, obj, cfg)
     d = res.diagnostics
     assert d["mode"] == "articulated" and d["fit"]["loss_first_last"][1] < d["fit"]["loss_first_last"][0]
@@ -187,6 +190,27 @@ def test_the_surface_step_records_a_joint_per_body_that_fits_the_rendered_surfac
     assert float(d.model.values[d.ref_index].detach().abs().max()) == 0.0
 
 
+def test_polish_fits_the_chosen_model_on_larger_views(data, monkeypatch):
+    """``polish``: more steps of the articulated fit on views of at most ``polish_max_side`` px (here 96, the
+    fit's 64), in place, the gauge state's values held; its loss falls."""
+    from pd2gs.discovery import pipeline as P
+
+    d = initialised_cabinet(data, "kabsch")
+    d.cfg = dataclasses.replace(d.cfg, polish_iters=40, polish_max_side=96)
+    sizes = []
+    fit = P.fit_articulated
+    monkeypatch.setattr(P, "fit_articulated", lambda m, frames, masks, cfg: (sizes.extend(f.size for f in frames),
+                                                                          fit(m, frames, masks, cfg))[1])
+    before = d.model.values.detach().clone()
+    P.polish(d)
+    p = d.diag["polish"]
+    assert p["max_side"] == 96 and p["seconds"] > 0 and max(max(s) for s in sizes) == 96
+    assert max(max(f.size) for f in d.frames) == 64  # the fit's own views are left as they were
+    assert p["loss_first_last"][1] < p["loss_first_last"][0] * 1.5  # single-view steps: no blow-up
+    assert torch.equal(d.model.values[d.ref_index], before[d.ref_index])
+    assert not torch.equal(d.model.values, before)
+
+
 def test_every_start_is_discovered_and_the_lowest_held_out_l1_kept(data):
     """``starts`` x ``restarts``: one articulated discovery per start and seed; the kept one has the lowest
     held-out L1, and it is the same model that start and seed alone give."""
@@ -197,7 +221,7 @@ def test_every_start_is_discovered_and_the_lowest_held_out_l1_kept(data):
     fld, _ = perfect_field(obj.twin, obj.meta, STATES, n=1200, jitter=0.002)
     fld = coloured(fld, obj)
     bg = tuple(float(c) for c in obj.states["m0"].views[0].rgb[0, 0] / 255.0)
-    quick = dict(fit_max_side=48, background=bg, fit_iters=60, select=False)
+    quick = dict(fit_max_side=48, background=bg, fit_iters=60, select=False, polish_iters=0)
 
     def run(**kw):
         d = P.stage1(fld, obj, DiscoveryConfig(**quick, **kw))
