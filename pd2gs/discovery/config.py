@@ -20,6 +20,7 @@ Ablation switches (docs/pd2gs-parts.md has the table):
   count from meta.json).
 * ``fit_silhouette``  — articulated: weight of the object-silhouette loss (0 = RGB only).
 * ``fit_depth``       — articulated: weight of a depth loss (0, the default: PD²GS is RGB-only).
+* ``canonical``       — articulated: the canonical state, "widest" (default) or "start".
 * ``select``          — articulated: False keeps the initial part count, tree and types.
 * ``starts``          — articulated: the first joints (stage 1's Kabsch joints, the coarse joint search's,
                         the search on stage 1's rendered surfaces); each is discovered and the lowest
@@ -85,6 +86,12 @@ class DiscoveryConfig:
     split_disconnected: bool = False
     """ours: split clusters into spatially connected pieces (parts that always move together, e.g. equal
     drawers in multi-part states)."""
+
+    canonical: Literal["widest", "start"] = "widest"
+    """articulated: the state whose stage-1 Gaussians become the canonical geometry (joint values 0 there).
+    "widest" (ours): the used state whose object silhouettes cover the most pixels on average, the most open
+    one, where parts hidden in a closed state (a drawer's box, a tray) are seen; the start where no view has
+    a mask. "start": the start state (the default until 2026-11-27)."""
 
     # --- how many parts
     counter: Literal["trajectory", "motion", "vlm", "given"] = "trajectory"

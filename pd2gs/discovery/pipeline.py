@@ -240,9 +240,28 @@ def fit_config(d: Discovery, iters: int) -> FitConfig:
                      backend=c.render_backend, seed=c.seed)
 
 
+def canonical_state(d: Discovery) -> str:
+    """``cfg.canonical``: "start", or "widest": the used state whose views' object masks cover the largest
+    mean fraction of the image (the start when no view of a used state has a mask)."""
+    if d.cfg.canonical == "start" or d.obj is None:
+        return d.start
+    area = {}
+    for s in d.states:
+        cover = [float((v.mask > 0).mean()) for v in d.obj.states[s].views if v.has_mask]
+        if not cover:
+            return d.start
+        area[s] = float(np.mean(cover))
+    best = max(d.states, key=lambda s: (area[s], s == d.start))
+    d.diag["canonical"] = {"state": best, "mask_area": area}
+    return best
+
+
 def initialise(d: Discovery) -> None:
-    """Part count, rigid-motion clusters and Kabsch joints of stage 1 -> the first (flat) articulated model."""
-    init = init_from_field(d.fld, d.states, d.start, d.end, cfg=d.cfg, obj=d.obj, min_opacity=d.cfg.fit_min_opacity)
+    """Part count, rigid-motion clusters and Kabsch joints of stage 1 -> the first (flat) articulated model,
+    canonical at :func:`canonical_state`."""
+    ref = canonical_state(d)
+    other = d.end if ref != d.end else d.start  # the state whose initial values are made positive
+    init = init_from_field(d.fld, d.states, ref, other, cfg=d.cfg, obj=d.obj, min_opacity=d.cfg.fit_min_opacity)
     d.diag["count"] = init.count
     if init.model.num_bodies < 2:
         raise ObjectFailure(f"no movable part found (count {init.count.get('n')}, "
@@ -319,23 +338,26 @@ def posed_field(model: ArticulatedGaussians, states: list[str]) -> StateField:
 @torch.no_grad()
 def model_joints(model: ArticulatedGaussians, states: list[str], start: str, end: str) -> dict[int, JointFit]:
     """Each movable body's joint as the submission writes it: axis and pivot in the world frame at ``start``
-    (the canonical frame, where every value is 0), values per state relative to its parent, the axis
-    signed so the ``end`` value is positive. Both Kabsch type rules are evaluated on the body's posed centres
+    (the parent posed there; the canonical frame may be another state's), values per state relative to its
+    parent and 0 at ``start``, the axis signed so the ``end`` value is positive. Both Kabsch type rules are evaluated on the body's posed centres
     in its parent's frame and reported beside the fitted type."""
     s0, s1 = states.index(start), states.index(end)
     lab = model.labels()
     out = {}
     for b in range(1, model.num_bodies):
         j, p = b - 1, model.parent[b]
-        axis = model.unit_axes[j].double().numpy()
+        bp0 = model.body_poses(s0)
+        Rp, tp = bp0.R[p].double(), bp0.t[p].double()
+        axis = (Rp @ model.unit_axes[j].double()).numpy()
         vals = model.values[:, j].double().numpy()
         vals = vals - vals[s0]
         if vals[s1] < 0:
             axis, vals = -axis, -vals
         own = lab == b
-        origin = model.pivots[j].double().numpy()
+        origin = (Rp @ model.pivots[j].double() + tp).numpy()
         if model.joint_types[j] == "prismatic" and bool(own.any()):
-            origin = model.gaussians.means[own].double().mean(0).numpy()
+            x0 = model.gaussians.means[own].double().mean(0)
+            origin = (bp0.R[b].double() @ x0 + bp0.t[b].double()).numpy()
         rel = []
         for k in range(len(states)):
             bp = model.body_poses(k)
