@@ -339,8 +339,8 @@ def posed_field(model: ArticulatedGaussians, states: list[str]) -> StateField:
 def model_joints(model: ArticulatedGaussians, states: list[str], start: str, end: str) -> dict[int, JointFit]:
     """Each movable body's joint as the submission writes it: axis and pivot in the world frame at ``start``
     (the parent posed there; the canonical frame may be another state's), values per state relative to its
-    parent and 0 at ``start``, the axis signed so the ``end`` value is positive. Both Kabsch type rules are evaluated on the body's posed centres
-    in its parent's frame and reported beside the fitted type."""
+    parent and 0 at ``start``, the axis signed so the ``end`` value is positive. Both Kabsch type rules are
+    evaluated on the body's posed centres in its parent's frame and reported beside the fitted type."""
     s0, s1 = states.index(start), states.index(end)
     lab = model.labels()
     out = {}
