@@ -344,9 +344,9 @@ def model_joints(model: ArticulatedGaussians, states: list[str], start: str, end
     s0, s1 = states.index(start), states.index(end)
     lab = model.labels()
     out = {}
+    bp0 = model.body_poses(s0)
     for b in range(1, model.num_bodies):
         j, p = b - 1, model.parent[b]
-        bp0 = model.body_poses(s0)
         Rp, tp = bp0.R[p].double(), bp0.t[p].double()
         axis = (Rp @ model.unit_axes[j].double()).numpy()
         vals = model.values[:, j].double().numpy()
