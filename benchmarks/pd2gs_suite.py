@@ -55,7 +55,8 @@ ABLATIONS = {  # name -> DiscoveryConfig overrides (same trained field)
     "search-seed-1": {"starts": "search", "seed": 1},
     "kabsch": {"starts": "kabsch"},  # from stage 1's Kabsch joints only (the default until 2026-11-26)
     "kabsch-seed-1": {"starts": "kabsch", "seed": 1},
-    "canonical-start": {"canonical": "start"},  # the start state's Gaussians as the canonical geometry (until 2026-11-27)
+    "canonical-start": {"canonical": "start"},
+    "crop": {"fit_crop": 0.1},  # the fit's views cropped to the object's mask box (+10 %) before scaling  # the start state's Gaussians as the canonical geometry (until 2026-11-27)
 }
 
 
@@ -63,8 +64,10 @@ def _say(msg: str) -> None:
     print(msg, flush=True)
 
 
-def prepare_data(work: Path, ids: list[str] | None, split: str | None, limit: int | None) -> tuple[Path, list[str]]:
-    """Generate the suite twins (once) and render the pd2gs protocol for the selected objects."""
+def prepare_data(work: Path, ids: list[str] | None, split: str | None, limit: int | None,
+                 protocol: str = "pd2gs") -> tuple[Path, list[str]]:
+    """Generate the suite twins (once) and render ``protocol`` (rsart's capture protocols: pd2gs, the
+    default, or rs-art with the single-part states too) for the selected objects."""
     from rsart.cli import main as rsart_main
     from rsart.format import read_index
 
@@ -89,10 +92,11 @@ def prepare_data(work: Path, ids: list[str] | None, split: str | None, limit: in
         raise SystemExit(f"not in rsart-synth: {unknown}")
     data = work / "data"
     for oid in ids:
-        if (data / oid / "states" / "m3" / "cameras.json").is_file():
+        done = data / oid / "render.json"
+        if done.is_file() and protocol in json.loads(done.read_text()).get("protocols", {}):
             continue
         t0 = time.time()
-        if rsart_main(["render", str(twins / oid), "--protocol", "pd2gs", "--out", str(data), "--size", "320x240",
+        if rsart_main(["render", str(twins / oid), "--protocol", protocol, "--out", str(data), "--size", "320x240",
                        "--background", "plain", "--no-progress"]):
             raise SystemExit(f"rsart render failed on {oid}")
         _say(f"rendered {oid} in {time.time() - t0:.0f} s")
@@ -176,13 +180,14 @@ def parts_within(scores: dict, deg: float) -> tuple[int, int]:
     return hit, total
 
 
-def report(scores: dict[str, dict], timing: dict, work: Path, ids: list[str], wall: float) -> str:
+def report(scores: dict[str, dict], timing: dict, work: Path, ids: list[str], wall: float,
+           protocol: str = "pd2gs") -> str:
     default = scores["default"]
     lines = [f"# PD²GS on rsart-synth ({len(ids)} objects, default CPU settings)", "",
              f"Measured {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())} on {os.cpu_count()} CPU cores "
              f"({platform.processor() or platform.machine()}), load average at the end "
              f"{', '.join(f'{x:.1f}' for x in os.getloadavg())}; total wall time {wall / 60:.0f} min.",
-             f"Objects: {', '.join(ids)}.", "",
+             f"Capture protocol: {protocol}. Objects: {', '.join(ids)}.", "",
              "## Default configuration, per category (rsart-eval summary)", "",
              (work / "scores" / "default" / "summary.md").read_text().split("\n", 2)[2].strip(), "",
              "## Targets (means over 2-part objects, start/end mean)", "",
@@ -209,11 +214,12 @@ def report(scores: dict[str, dict], timing: dict, work: Path, ids: list[str], wa
     for oid, t in timing.items():
         lines.append(f"| {oid} | {t['category']} | {t['train_s']:.0f} | {t.get('discover_s[default]', float('nan')):.0f} | "
                      f"{t['total_s'] / 60:.1f} |")
+    cols = list(dict.fromkeys([k for t in timing.values() for k in t.get("test_psnr", {}) if k != "mean"] + ["mean"]))
     lines += ["", "## Test-view PSNR of the trained fields (dB; target ≥ 28 on 2-part objects)", "",
-              "| object | " + " | ".join(["m0", "m1", "m2", "m3", "mean"]) + " |", "|---|" + "---:|" * 5]
+              "| object | " + " | ".join(cols) + " |", "|---|" + "---:|" * len(cols)]
     for oid, t in timing.items():
         ps = t.get("test_psnr", {})
-        lines.append(f"| {oid} | " + " | ".join(_fmt(ps.get(k)) for k in ("m0", "m1", "m2", "m3", "mean")) + " |")
+        lines.append(f"| {oid} | " + " | ".join(_fmt(ps.get(k)) for k in cols) + " |")
     lines += ["", "## Per part (default configuration)", "",
               "Predicted movable parts / true ones per object; per true part the matched prediction and its joint "
               "errors (`–`: not applicable or no match; the reason is in scores.json).", "",
@@ -246,6 +252,9 @@ def main() -> int:
     ap.add_argument("--work", type=Path, default=Path("/tmp/pd2gs-suite"), help="scratch folder (reused)")
     ap.add_argument("--split", default="two-part", help="suite split (default two-part)")
     ap.add_argument("--objects", help="comma-separated object ids (instead of --split)")
+    ap.add_argument("--protocol", default="pd2gs", choices=["pd2gs", "rs-art"],
+                    help="capture protocol rendered for training: pd2gs (4 multi-part states, default) or rs-art "
+                         "(every state of meta.json, the single-part ones too)")
     ap.add_argument("--limit", type=int, help="at most this many objects of the split, spread over categories")
     ap.add_argument("--iters", type=int, help="training iterations (default: TrainConfig's)")
     ap.add_argument("--ablations", default=",".join(ABLATIONS), help="comma list of " + ", ".join(ABLATIONS))
@@ -266,14 +275,15 @@ def main() -> int:
         raise SystemExit(f"unknown ablations {bad}; choose from {list(ABLATIONS)}")
     t0 = time.time()
     args.work.mkdir(parents=True, exist_ok=True)
-    data, ids = prepare_data(args.work, args.objects.split(",") if args.objects else None, args.split, args.limit)
+    data, ids = prepare_data(args.work, args.objects.split(",") if args.objects else None, args.split, args.limit,
+                             args.protocol)
     if args.train_only:
         run_all(data, ids, args.work, args.iters, [], args.workers, args.backend, args.address, args.threads)
         _say(f"trained {len(ids)} objects in {(time.time() - t0) / 60:.0f} min")
         return 0
     res = run_all(data, ids, args.work, args.iters, abl, args.workers, args.backend, args.address, args.threads)
     scores = score(data, res["submissions"], args.work, ids)
-    md = report(scores, res["timing"], args.work, ids, time.time() - t0)
+    md = report(scores, res["timing"], args.work, ids, time.time() - t0, args.protocol)
     from rsart.io import atomic_write_text, write_json
 
     args.out.parent.mkdir(parents=True, exist_ok=True)
