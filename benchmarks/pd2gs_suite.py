@@ -55,8 +55,7 @@ ABLATIONS = {  # name -> DiscoveryConfig overrides (same trained field)
     "search-seed-1": {"starts": "search", "seed": 1},
     "kabsch": {"starts": "kabsch"},  # from stage 1's Kabsch joints only (the default until 2026-11-26)
     "kabsch-seed-1": {"starts": "kabsch", "seed": 1},
-    "canonical-start": {"canonical": "start"},
-    "crop": {"fit_crop": 0.1},  # the fit's views cropped to the object's mask box (+10 %) before scaling  # the start state's Gaussians as the canonical geometry (until 2026-11-27)
+    "canonical-start": {"canonical": "start"},  # the start state's Gaussians as the canonical geometry (until 2026-11-27)
 }
 
 
