@@ -12,6 +12,9 @@
 # In this workplace: run tool, carry [".whl"], command "bash benchmarks/gsplat_device_check.sh",
 # timeout_s 540. Results land in $OUT (default /tmp/gsplat_check): gsplat-device.json, *.log.
 #
+# DISCOVERY_DATA=<rendered object folder> adds an end-to-end run (benchmarks/gsplat_device_discovery.py:
+# training and articulated discovery on gsplat; DISCOVERY_CPU=1 also discovery on cpu); SKIP_BENCH=1 skips
+# the rasterizer timing.
 # Env: TORCH_CUDA_ARCH_LIST (default: the GPU's own capability), MAX_JOBS (default: cores),
 # N / SIZE / REPS / CPU_REPS for the benchmark (default 100000 / 640x480 / 20 / 3).
 set -uo pipefail
@@ -56,7 +59,17 @@ OLD=""
 [ -f .whl/old_gsplat_backend.py ] && OLD="--old .whl/old_gsplat_backend.py"
 python3 benchmarks/gsplat_device_bench.py diff $OLD --out "$OUT/gsplat-device.json" 2>&1 | tee "$OUT/diff.log"
 
+if [ -n "${SKIP_BENCH:-}" ]; then stamp "bench skipped (SKIP_BENCH)"; else
 stamp "bench"
 python3 benchmarks/gsplat_device_bench.py bench --n "${N:-100000}" --size "${SIZE:-640x480}" \
   --reps "${REPS:-20}" --cpu-reps "${CPU_REPS:-3}" --out "$OUT/gsplat-device.json" 2>&1 | tee "$OUT/bench.log"
+fi
+
+if [ -n "${DISCOVERY_DATA:-}" ]; then
+  # end to end: train one object's field and run the articulated discovery on gsplat (joints only: meshing
+  # needs open3d, which cannot travel); DISCOVERY_CPU=1 adds the same discovery on the cpu backend
+  stamp "discovery on gsplat ($DISCOVERY_DATA)"
+  python3 benchmarks/gsplat_device_discovery.py --data "$DISCOVERY_DATA" --work /tmp/gsplat_discovery \
+    --out "$OUT" ${DISCOVERY_CPU:+--cpu-discovery} 2>&1 | tee "$OUT/discovery.log"
+fi
 stamp "done"

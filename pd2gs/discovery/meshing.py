@@ -7,8 +7,6 @@ in open3d 0.20.0). Depth maps are z-depth in scene units, 0 = no depth; cameras 
 from __future__ import annotations
 
 import numpy as np
-import open3d as o3d
-import open3d.core as o3c
 import torch
 import trimesh
 
@@ -27,6 +25,10 @@ def tsdf_fuse(depths: list[np.ndarray], cams: list[Camera], voxel: float, trunc_
     voxel: voxel edge (scene units); trunc_voxels: truncation in voxels; depth_max: ignore farther depth
     (default: the largest depth + 1 truncation). Returns an empty Trimesh when nothing was fused.
     """
+    # imported here, not at the top: joints and parts need no open3d (rsart[render]); only meshes do
+    import open3d as o3d
+    import open3d.core as o3c
+
     dev = o3c.Device("CPU:0")
     depths = [np.where(np.isfinite(d) & (d > 0), d, 0.0) for d in depths]  # NaN, inf, negative: no depth
     valid = [d for d in depths if np.any(d > 0)]
