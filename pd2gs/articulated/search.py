@@ -189,7 +189,8 @@ def _plane(a: np.ndarray) -> np.ndarray:
 
 
 class _Body:
-    """The Gaussians one body's hypotheses are scored on: the body's own (its ``max_points`` most opaque)
+    """The Gaussians one body's hypotheses are scored on (a hypothesis is the body's joint relative to its
+    parent, posed with the parent's current pose in every state): the body's own (its ``max_points`` most opaque)
     and those of the other movable bodies within ``reach`` x the object's extent of them (as many at most:
     a fragment of a part is scored together with the rest of that part), as canonical points P (M, 3),
     colours (M, 3), weights (M,) = opacity, and ``alt`` (M,) each one's cost under the better of not moving
@@ -221,6 +222,11 @@ class _Body:
         self.alt = costs[idx, 0].clone()  # the body's own: not moving; the others: also their owner's joint
         self.alt[len(own):] = torch.minimum(self.alt[len(own):], costs[others, lab[others]])
         self.views, self.batch = views, cfg.batch
+        # a hypothesis is the body's joint relative to its parent: world pose = parent's pose o joint
+        poses = [model.body_poses(s) for s in range(model.num_states)]
+        p = model.parent[b]
+        self.parent_R = torch.stack([q.R[p] for q in poses]).detach().double()  # (S, 3, 3)
+        self.parent_t = torch.stack([q.t[p] for q in poses]).detach().double()  # (S, 3)
 
     def subset(self, n: int) -> "_Body":
         """A copy scored on at most n of the points (spread evenly over the own ones and the others)."""
@@ -239,6 +245,7 @@ class _Body:
         out = []
         for i in range(0, len(axes), self.batch):
             R, t = joint_poses(kind, axes[i:i + self.batch], pivots[i:i + self.batch], values[i:i + self.batch])
+            R, t = self.parent_R @ R, (self.parent_R @ t[..., None])[..., 0] + self.parent_t
             c = self.views.cost(torch.einsum("hsij,mj->hsmi", R, self.P) + t[:, :, None], self.colors)
             out.append((torch.minimum(c, self.alt[None]) * self.w).sum(1) / self.w.sum())
         return torch.cat(out)
@@ -254,8 +261,9 @@ def search_body(model: ArticulatedGaussians, b: int, views: ConsistencyViews, ra
                 cfg: SearchConfig) -> tuple[float, float, Hypothesis]:
     """Body b's best joint by the score of ``views`` (anything with ``cost(X (H, S, M, 3), colors (M, 3)) ->
     (H, M)``: :class:`ConsistencyViews`, or :class:`.surfaces.SurfaceViews`) -> (current joint's score, best
-    score, best hypothesis); the current joint is returned when nothing scores lower. See the module doc
-    for the hypotheses."""
+    score, best hypothesis); the current joint is returned when nothing scores lower. A hypothesis is b's
+    joint relative to its parent, posed with the parent's current motion (a chained child is searched on its
+    parent; :func:`pd2gs.articulated.select.searched_reparent`). See the module doc for the hypotheses."""
     j = b - 1
     body = _Body(model, b, views, cfg, pose_costs(model, views))
     cur: Hypothesis = (model.joint_types[j], model.unit_axes[j].detach().double().numpy(),
