@@ -27,7 +27,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 def _save(path: Path, doc: dict) -> None:
     tmp = path.with_suffix(".tmp")
-    tmp.write_text(json.dumps(doc, indent=1))
+    tmp.write_text(json.dumps(doc, indent=1, default=float))
     os.replace(tmp, path)
 
 
@@ -104,13 +104,14 @@ def main() -> None:
             joints, start, end = d.joints, d.start, d.end
 
         rec = {"seconds": secs, "test_loss": d.diag.get("test_loss"), "tree": d.diag.get("tree"),
-               "fitted": {f"p{b}": jf.to_submission() for b, jf in d.joints.items()}}
+               "fitted": {f"p{b}": jf.to_submission() for b, jf in d.joints.items()},
+               "starts": d.diag.get("starts"), "select_log": d.diag.get("select", {}).get("log")}
         try:
             rec["joints"] = joint_report(_R, obj)
         except Exception as e:  # keep the run's raw joints even if the report breaks
             rec["joints_error"] = f"{type(e).__name__}: {e}"
         doc[f"discovery_{backend}"] = rec
-        print(f"discovery [{backend}]:", json.dumps(doc[f"discovery_{backend}"]), flush=True)
+        print(f"discovery [{backend}]:", json.dumps(doc[f"discovery_{backend}"], default=float), flush=True)
         _save(doc_path, doc)
 
 

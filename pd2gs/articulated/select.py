@@ -63,7 +63,10 @@ class SelectConfig:
     (None: half the penalty)
     (ties go to the incumbent: a swap or re-parent adds no body, so the penalty cannot stop it, and a short
     re-fit's noise alone must not change the tree); ``type_check``: after the structure rounds, every
-    joint's type swap is re-fitted, unscreened, in rounds of its own."""
+    joint's type swap is re-fitted, unscreened, in rounds of its own; ``search_max_bodies``: re-parents found
+    by the coarse search (:func:`searched_reparent`) are offered while the model has at most this many
+    movable bodies (a compute budget: each is one coarse search, tens of seconds on 2 cores, and a tree of K
+    bodies has K(K-1) re-parents; over-segmented trees are merged down first)."""
 
     penalty: float | None = None
     penalty_rel: float = 0.02
@@ -74,6 +77,7 @@ class SelectConfig:
     screen_views: int | None = 2
     min_gain: float | None = None
     type_check: bool = True
+    search_max_bodies: int = 3
 
 
 @dataclass
@@ -297,7 +301,8 @@ def select_model(model: ArticulatedGaussians, frames: list[Frame], masks=None, c
     scfg = SearchConfig()
     search = (ConsistencyViews(frames, masks, model.num_states, "train", scfg.views_per_state, scfg.tau_px), scfg)
     for _ in range(cfg.max_rounds):
-        cands = candidates(best, ref, trajectories, search)
+        cands = candidates(best, ref, trajectories,
+                           search if best.num_bodies - 1 <= cfg.search_max_bodies else None)
         if cfg.refit_top is not None and len(cands) > cfg.refit_top:
             screened = sorted(((score(c, screen, screen_masks, cfg), i) for i, (_, c) in enumerate(cands)))
             for sc, i in screened:
