@@ -31,14 +31,15 @@ def _save(path: Path, doc: dict) -> None:
     os.replace(tmp, path)
 
 
-def joint_report(res, obj) -> list[dict]:
-    """Per true movable joint: the predicted joint of the smallest axis angle and its errors."""
+def joint_report(joints: dict, start: str, end: str, obj) -> list[dict]:
+    """Per true movable joint: the predicted joint (``joints``: body -> JointFit) of the smallest axis angle
+    and its errors."""
     from rsart.metrics.joints import JointEstimate, joint_errors
 
     ev = obj.meta.eval_states
     vs, ve = obj.meta.state(ev["start"]).values, obj.meta.state(ev["end"]).values
     axes = obj.twin.posed_axes(vs)
-    preds = {f"p{b}": jf.estimate(res.start, res.end) for b, jf in res.joints.items()}
+    preds = {f"p{b}": jf.estimate(start, end) for b, jf in joints.items()}
     out = []
     for j in obj.twin.joints:
         if j.type not in ("revolute", "prismatic"):
@@ -99,15 +100,11 @@ def main() -> None:
         d = stage1(model, obj, cfg)
         articulated_parts(d)
         secs = time.perf_counter() - t0
-
-        class _R:  # the joints and eval states, as joint_report reads them
-            joints, start, end = d.joints, d.start, d.end
-
         rec = {"seconds": secs, "test_loss": d.diag.get("test_loss"), "tree": d.diag.get("tree"),
                "fitted": {f"p{b}": jf.to_submission() for b, jf in d.joints.items()},
                "starts": d.diag.get("starts"), "select_log": d.diag.get("select", {}).get("log")}
         try:
-            rec["joints"] = joint_report(_R, obj)
+            rec["joints"] = joint_report(d.joints, d.start, d.end, obj)
         except Exception as e:  # keep the run's raw joints even if the report breaks
             rec["joints_error"] = f"{type(e).__name__}: {e}"
         doc[f"discovery_{backend}"] = rec

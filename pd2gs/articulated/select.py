@@ -299,9 +299,12 @@ def select_model(model: ArticulatedGaussians, frames: list[Frame], masks=None, c
     best_score = loss + cfg.penalty * complexity(best)  # = score(best, ...), without rendering the views again
     sel = Selection(best, best_score, [{"edit": "start", "bodies": best.num_bodies, "score": best_score,
                                         "penalty": cfg.penalty}])
-    scfg = SearchConfig()
-    search = (ConsistencyViews(frames, masks, model.num_states, "train", scfg.views_per_state, scfg.tau_px), scfg)
+    search = None  # (views, config) of the searched re-parents, built on first use (off by default)
     for _ in range(cfg.max_rounds):
+        if search is None and best.num_bodies - 1 <= cfg.search_max_bodies:
+            scfg = SearchConfig()
+            search = (ConsistencyViews(frames, masks, model.num_states, "train", scfg.views_per_state, scfg.tau_px),
+                      scfg)
         cands = candidates(best, ref, trajectories,
                            search if best.num_bodies - 1 <= cfg.search_max_bodies else None)
         if cfg.refit_top is not None and len(cands) > cfg.refit_top:
