@@ -32,7 +32,6 @@ import logging
 import math
 import os
 import socket
-import sys
 import time
 import traceback
 from dataclasses import dataclass, field
@@ -95,26 +94,6 @@ def set_threads(n: int) -> None:
         numba.set_num_threads(min(n, numba.config.NUMBA_NUM_THREADS))
     except ImportError:  # pragma: no cover - numba is a core dependency
         pass
-
-
-def private_numba_cache() -> None:
-    """Make this process compile pd2gs's numba kernels itself instead of loading them from the shared cache.
-
-    Measured (storage-0001, 40 iterations, 1 thread): a process that loads the cached backward kernel
-    (``pd2gs/render/cpu_kernels.py``, parallel + fastmath) trains a different field (latents up to 6e-3
-    apart) than one that compiled it, while any two compiling processes, and any two loading ones, agree
-    bit for bit. On a cold cache the first tasks compile and later ones load, so one run would mix both;
-    a private cache folder per worker process (created before numba is imported) makes every task compile.
-    Costs one compile per worker process (seconds; a task is minutes). No-op once numba is imported."""
-    if "numba" in sys.modules:
-        return
-    import atexit
-    import shutil
-    import tempfile
-
-    path = tempfile.mkdtemp(prefix="pd2gs-numba-")
-    atexit.register(shutil.rmtree, path, True)
-    os.environ["NUMBA_CACHE_DIR"] = path
 
 
 def default_threads(workers: int) -> int:
@@ -282,8 +261,10 @@ def _discover_stage(task: ObjectTask, obj, run: Path, timings: dict) -> list[str
 def run_object(task: ObjectTask) -> Outcome:
     """Train and discover one object (in a worker process). Never raises for a failing object: the reason is
     in the Outcome, ``object.json`` and ``log.txt``."""
-    private_numba_cache()
     set_threads(task.threads)
+    from .render.kernel_cache import warm_in_subprocess
+
+    warm_in_subprocess()  # every task loads the same compiled kernels (pd2gs.render.kernel_cache)
     import rsart
 
     run = Path(task.run_dir)
