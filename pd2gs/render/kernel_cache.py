@@ -3,7 +3,7 @@
 Why: a process that loads the cached compositing kernels renders with slightly different float rounding than
 one that compiled them (measured, storage-0001, 40 training iterations, 1 thread: latents up to 6e-3 apart),
 while any two loading processes agree bit for bit. ``pd2gs run`` calls :func:`warm_in_subprocess` in each
-worker process before numba is imported there, so every task loads the same compiled kernels: the same
+worker process before it renders, so every task loads the same compiled kernels: the same
 submission from any worker, on a rerun and after a retried task, and one compile per cache (33 s measured on 2
 cores, both float types) instead of one per worker process.
 
@@ -52,7 +52,7 @@ def warm_in_subprocess(timeout: float = 900.0) -> bool:
     """Fill the kernel cache from a child process, once per process (later calls return at once) -> whether
     the child succeeded. On failure (a cache folder that cannot be written, say) this process compiles the
     kernels itself, and its outputs may differ in the last bits from those of tasks that loaded them; a
-    warning in the object's log says so."""
+    warning is logged."""
     global _WARMED
     if _WARMED:
         return True
