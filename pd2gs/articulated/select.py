@@ -301,12 +301,12 @@ def select_model(model: ArticulatedGaussians, frames: list[Frame], masks=None, c
                                         "penalty": cfg.penalty}])
     search = None  # (views, config) of the searched re-parents, built on first use (off by default)
     for _ in range(cfg.max_rounds):
-        if search is None and best.num_bodies - 1 <= cfg.search_max_bodies:
+        searched = best.num_bodies - 1 <= cfg.search_max_bodies
+        if searched and search is None:
             scfg = SearchConfig()
             search = (ConsistencyViews(frames, masks, model.num_states, "train", scfg.views_per_state, scfg.tau_px),
                       scfg)
-        cands = candidates(best, ref, trajectories,
-                           search if best.num_bodies - 1 <= cfg.search_max_bodies else None)
+        cands = candidates(best, ref, trajectories, search if searched else None)
         if cfg.refit_top is not None and len(cands) > cfg.refit_top:
             screened = sorted(((score(c, screen, screen_masks, cfg), i) for i, (_, c) in enumerate(cands)))
             for sc, i in screened:

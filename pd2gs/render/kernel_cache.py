@@ -13,7 +13,6 @@ cores, both float types) instead of one per worker process.
 from __future__ import annotations
 
 import logging
-import os
 import subprocess
 import sys
 
@@ -60,8 +59,7 @@ def warm_in_subprocess(timeout: float = 900.0) -> bool:
     if "pd2gs.render.cpu_kernels" in sys.modules:  # this process already holds its kernels
         return True
     try:
-        r = subprocess.run([sys.executable, "-m", __name__], capture_output=True, text=True, timeout=timeout,
-                           env=dict(os.environ))
+        r = subprocess.run([sys.executable, "-m", __name__], capture_output=True, text=True, timeout=timeout)
     except (OSError, subprocess.TimeoutExpired) as e:
         log.warning("numba kernel cache not filled (%s); this process compiles the kernels itself", e)
         return False
