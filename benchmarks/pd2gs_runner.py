@@ -28,8 +28,9 @@ def _say(msg: str) -> None:
     print(msg, flush=True)
 
 
-def prepare(work: Path, n: int, size: str, views: int) -> Path:
-    """Render ``n`` procedural objects (pd2gs protocol, ``views`` train views per state) into work/data."""
+def prepare(work: Path, n: int, size: str, views: int) -> tuple[Path, list[str]]:
+    """Render ``n`` procedural objects (pd2gs protocol, ``views`` train views per state) into work/data
+    -> (data folder, their object ids: the folder may hold more, from an earlier run with more objects)."""
     from rsart.cli import main as rsart_main
     from rsart.sources.procedural.registry import CATEGORIES as KNOWN, generate
     from rsart.twin_io import write_object
@@ -38,8 +39,10 @@ def prepare(work: Path, n: int, size: str, views: int) -> Path:
     if len(picks) < n:
         raise SystemExit(f"only {len(picks)} of the benchmark's categories exist: {picks}")
     data = work / "data"
+    ids = []
     for cat, seed in picks:
         g = generate(cat, seed)
+        ids.append(g.object_id)
         if (data / g.object_id / "states" / "m3" / "cameras.json").is_file():
             continue
         write_object(g.twin, work / "twins" / g.object_id, object_id=g.object_id, category=g.category,
@@ -48,7 +51,7 @@ def prepare(work: Path, n: int, size: str, views: int) -> Path:
                        "--size", size, "--views", str(views), "--test-views", "1", "--background", "plain",
                        "--workers", "1", "--no-progress"]):
             raise SystemExit(f"rsart render failed on {g.object_id}")
-    return data
+    return data, ids
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -75,7 +78,7 @@ def main(argv: list[str] | None = None) -> int:
     if not counts or min(counts) < 1:
         raise SystemExit(f"--workers: positive worker counts, got {args.workers!r}")
     args.work.mkdir(parents=True, exist_ok=True)
-    data = prepare(args.work, args.objects, args.size, args.views)
+    data, ids = prepare(args.work, args.objects, args.size, args.views)
     w, h = parse_size(args.size)
     tcfg = TrainConfig(iters=args.iters, size=(w // 2, h // 2))
     dcfg = DiscoveryConfig() if args.discovery == "default" else DiscoveryConfig(mode="paper", refine=False)
@@ -84,7 +87,7 @@ def main(argv: list[str] | None = None) -> int:
         out = args.work / f"run-{args.backend}-w{n}"
         shutil.rmtree(out, ignore_errors=True)  # from scratch: nothing reused
         t0 = time.perf_counter()
-        run(data, out, train_cfg=tcfg, discovery_cfg=dcfg, progress=False, backend=args.backend,
+        run(data, out, objects=ids, train_cfg=tcfg, discovery_cfg=dcfg, progress=False, backend=args.backend,
             workers=n, threads=args.threads)
         wall = time.perf_counter() - t0
         summary = json.loads((out / "summary.json").read_text())
