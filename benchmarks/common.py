@@ -22,10 +22,44 @@ def load_avg() -> list[float]:
     return [round(x, 2) for x in os.getloadavg()]
 
 
+def cpu_description(cpuinfo: str | os.PathLike = "/proc/cpuinfo") -> str:
+    """The processor in one line, e.g. ``"AMD EPYC (family 25 model 1), 2445 MHz, AVX2"``: the model name,
+    family/model numbers, clock and widest AVX level of the first CPU in ``cpuinfo`` (Linux's format).
+    Two machines both called "AMD EPYC" ran the CPU rasterizer 3.5x apart (one had AVX-512), so a timed
+    result says which one it ran on. Falls back to ``platform.processor()`` or ``platform.machine()`` where
+    there is no readable cpuinfo."""
+    fields: dict[str, str] = {}
+    try:
+        text = Path(cpuinfo).read_text(errors="replace")
+    except OSError:
+        text = ""
+    for line in text.split("\n\n", 1)[0].splitlines():
+        key, sep, value = line.partition(":")
+        if sep:
+            fields.setdefault(key.strip(), value.strip())
+    name = fields.get("model name")
+    if not name:
+        return platform.processor() or platform.machine()
+    if "cpu family" in fields and "model" in fields:
+        name += f" (family {fields['cpu family']} model {fields['model']})"
+    parts = [name]
+    if "cpu MHz" in fields:
+        try:
+            parts.append(f"{float(fields['cpu MHz']):.0f} MHz")
+        except ValueError:
+            pass
+    flags = set(fields.get("flags", "").split())
+    level = next((lvl for flag, lvl in (("avx512f", "AVX-512"), ("avx2", "AVX2"), ("avx", "AVX")) if flag in flags), None)
+    if level:
+        parts.append(level)
+    return ", ".join(parts)
+
+
 def machine(**extra: Any) -> dict:
-    """cpus, python, platform and processor of this machine, plus ``extra`` keys (load averages, say)."""
+    """cpus, python, platform and processor of this machine (``cpu_description``), plus ``extra`` keys
+    (load averages, say)."""
     return {"cpus": os.cpu_count(), "python": platform.python_version(), "platform": platform.platform(),
-            "processor": platform.processor(), **extra}
+            "processor": cpu_description(), **extra}
 
 
 def write_result(path: str | os.PathLike, result: dict, echo: bool = False) -> None:

@@ -32,7 +32,6 @@ import argparse
 import dataclasses
 import json
 import os
-import platform
 import sys
 import time
 from pathlib import Path
@@ -452,7 +451,8 @@ def main(argv: list[str] | None = None) -> int:
     from pd2gs.train import TrainConfig
 
     any_t = next(iter(res["timing"].values()))
-    meta = {"cpus": os.cpu_count(), "processor": platform.processor() or platform.machine(),
+    from common import cpu_description
+    meta = {"cpus": os.cpu_count(), "processor": cpu_description(),
             "load": ", ".join(f"{x:.1f}" for x in os.getloadavg()), "wall_min": (time.time() - t0) / 60,
             "iters": args.iters or TrainConfig().iters, "threads": any_t.get("threads"), "workers": args.workers,
             "resolution": json.loads((args.work / "prep.json").read_text())["resolution"]}

@@ -14,7 +14,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import shutil
 import sys
 import time
@@ -95,9 +94,10 @@ def main(argv: list[str] | None = None) -> int:
                      "load_after": os.getloadavg()})
         _say(f"{n} worker(s): {wall:.1f} s ({len(summary['done'])} done, {len(summary['failed'])} failed)")
     base = rows[0]["wall_s"]
+    from common import cpu_description
     lines = [f"# pd2gs run: wall time with {', '.join(map(str, counts))} workers ({args.backend} backend)", "",
              f"Measured {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())} on {os.cpu_count()} CPU cores "
-             f"({platform.processor() or platform.machine()}); {args.objects} tiny objects "
+             f"({cpu_description()}); {args.objects} tiny objects "
              f"({args.size} renders, {args.views} train views per state, {args.iters} training iterations at "
              f"{w // 2}x{h // 2}, {args.discovery} discovery); threads per task: "
              f"{args.threads or 'cores / workers'}.", "",

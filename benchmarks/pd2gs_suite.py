@@ -22,7 +22,6 @@ import argparse
 import dataclasses
 import json
 import os
-import platform
 import sys
 import time
 from pathlib import Path
@@ -181,10 +180,12 @@ def parts_within(scores: dict, deg: float) -> tuple[int, int]:
 
 def report(scores: dict[str, dict], timing: dict, work: Path, ids: list[str], wall: float,
            protocol: str = "pd2gs") -> str:
+    from common import cpu_description
+
     default = scores["default"]
     lines = [f"# PD²GS on rsart-synth ({len(ids)} objects, default CPU settings)", "",
              f"Measured {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())} on {os.cpu_count()} CPU cores "
-             f"({platform.processor() or platform.machine()}), load average at the end "
+             f"({cpu_description()}), load average at the end "
              f"{', '.join(f'{x:.1f}' for x in os.getloadavg())}; total wall time {wall / 60:.0f} min.",
              f"Capture protocol: {protocol}. Objects: {', '.join(ids)}.", "",
              "## Default configuration, per category (rsart-eval summary)", "",
