@@ -27,7 +27,8 @@ def cpu_description(cpuinfo: str | os.PathLike = "/proc/cpuinfo") -> str:
     family/model numbers, clock and widest AVX level of the first CPU in ``cpuinfo`` (Linux's format).
     Two machines both called "AMD EPYC" ran the CPU rasterizer 3.5x apart (one had AVX-512), so a timed
     result says which one it ran on. Falls back to ``platform.processor()`` or ``platform.machine()`` where
-    there is no readable cpuinfo."""
+    there is no readable cpuinfo. (Hand-written: the file is "key : value" lines, and py-cpuinfo would be a
+    new dependency for one header line.)"""
     fields: dict[str, str] = {}
     try:
         text = Path(cpuinfo).read_text(errors="replace")
