@@ -79,6 +79,14 @@ def test_helpers(relpath: str) -> ModuleType:
     return mod
 
 
+def report_paths(out: str | os.PathLike) -> tuple[Path, Path]:
+    """(markdown, json) paths of a benchmark report named by ``--out``: the same stem with ``.md`` and ``.json``,
+    so ``--out x.json`` cannot write the table and the record to one file (the later write would replace
+    the earlier)."""
+    out = Path(out)
+    return out.with_suffix(".md"), out.with_suffix(".json")
+
+
 def select_split(data, oids: list[str], name: str) -> str:
     """Record ``oids`` as split ``name`` of the data root's index.json (checksums rewritten), so rsart-eval
     can score a subset: it wants every object of what it scores in the submission. -> ``name``."""

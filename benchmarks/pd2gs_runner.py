@@ -107,11 +107,13 @@ def main(argv: list[str] | None = None) -> int:
     for r in rows:
         lines.append(f"| {r['workers']} | {r['wall_s']:.1f} | {base / r['wall_s']:.2f} | {r['done']} | "
                      f"{', '.join(f'{x:.1f}' for x in r['load_after'])} |")
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(args.out, "\n".join(lines) + "\n")
-    write_json(args.out.with_suffix(".json"), {"backend": args.backend, "objects": args.objects,
-                                               "iters": args.iters, "rows": rows})
-    _say(f"wrote {args.out}")
+    from common import report_paths
+
+    md_path, json_path = report_paths(args.out)
+    md_path.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(md_path, "\n".join(lines) + "\n")
+    write_json(json_path, {"backend": args.backend, "objects": args.objects, "iters": args.iters, "rows": rows})
+    _say(f"wrote {md_path} and {json_path}")
     return 0
 
 

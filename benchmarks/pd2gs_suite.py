@@ -263,7 +263,8 @@ def main() -> int:
                     help="local worker processes or Ray tasks (docs/pd2gs.md \"Running on a cluster\")")
     ap.add_argument("--address", default=None, help="Ray cluster address (default: a local Ray)")
     ap.add_argument("--threads", type=int, default=None, help="CPU threads per task (default: cores / workers)")
-    ap.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results" / "pd2gs-rsart-synth.md")
+    ap.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results" / "pd2gs-rsart-synth.md",
+                    help="report path: the table goes to its .md, the record to its .json")
     ap.add_argument("--train-only", action="store_true",
                     help="render and train the selected objects into --work, then stop (a later run reuses them)")
     args = ap.parse_args()
@@ -286,15 +287,17 @@ def main() -> int:
     md = report(scores, res["timing"], args.work, ids, time.time() - t0, args.protocol)
     from rsart.io import atomic_write_text, write_json
 
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(args.out, md)
+    from common import report_paths
+
+    md_path, json_path = report_paths(args.out)
+    md_path.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(md_path, md)
     per_object = {o["object_id"]: {k: o.get(k) for k in ("status", "metrics", "failures", "n_pred_movable",
                                                           "n_true_movable", "parts")}
                   for o in _objects(scores["default"])}
-    write_json(args.out.with_suffix(".json"), {"objects": ids, "timing": res["timing"], "per_object": per_object,
-                                               "overall": {k: v["aggregate"]["overall"] for k, v in scores.items()},
-                                               "categories": {k: v["aggregate"]["categories"]
-                                                              for k, v in scores.items()}})
+    write_json(json_path, {"objects": ids, "timing": res["timing"], "per_object": per_object,
+                           "overall": {k: v["aggregate"]["overall"] for k, v in scores.items()},
+                           "categories": {k: v["aggregate"]["categories"] for k, v in scores.items()}})
     _say(md)
     return 0
 
