@@ -12,7 +12,7 @@ from pathlib import Path
 from types import ModuleType
 from typing import Any
 
-from rsart.io import dumps_json, write_json
+from rsart.io import atomic_write_text, dumps_json, write_json
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -79,12 +79,16 @@ def test_helpers(relpath: str) -> ModuleType:
     return mod
 
 
-def report_paths(out: str | os.PathLike) -> tuple[Path, Path]:
-    """(markdown, json) paths of a benchmark report named by ``--out``: the same stem with ``.md`` and ``.json``,
-    so ``--out x.json`` cannot write the table and the record to one file (the later write would replace
-    the earlier)."""
+def write_report(out: str | os.PathLike, table: str, record: dict) -> tuple[Path, Path]:
+    """Write a benchmark report named by ``--out``: the markdown ``table`` to ``<out>.md`` and the ``record`` to
+    ``<out>.json``, both atomically, whatever ``out``'s suffix (``--out x.json`` once wrote the table to x.json
+    and then replaced it with the record). -> (markdown path, json path)."""
     out = Path(out)
-    return out.with_suffix(".md"), out.with_suffix(".json")
+    md_path, json_path = out.with_suffix(".md"), out.with_suffix(".json")
+    md_path.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(md_path, table)
+    write_json(json_path, record)
+    return md_path, json_path
 
 
 def select_split(data, oids: list[str], name: str) -> str:

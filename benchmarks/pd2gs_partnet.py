@@ -457,14 +457,9 @@ def main(argv: list[str] | None = None) -> int:
             "iters": args.iters or TrainConfig().iters, "threads": any_t.get("threads"), "workers": args.workers,
             "resolution": json.loads((args.work / "prep.json").read_text())["resolution"]}
     md = report(recs["default"], sums["default"], res["timing"], prep, sums, meta)
-    from rsart.io import atomic_write_text, write_json
+    from common import write_report
 
-    from common import report_paths
-
-    md_path, json_path = report_paths(args.out)
-    md_path.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(md_path, md)
-    write_json(json_path, {
+    write_report(args.out, md, {
         "objects": ids, "settings": meta, "prep_timing": prep, "timing": res["timing"], "failed_prep": failed,
         "paper": PAPER, "summary": sums,
         "per_object": {r["pid"]: {k: r.get(k) for k in ("object_id", "category", "status", "reason", "metrics",

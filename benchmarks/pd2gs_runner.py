@@ -71,7 +71,6 @@ def main(argv: list[str] | None = None) -> int:
     from pd2gs.discovery.config import DiscoveryConfig
     from pd2gs.run import run
     from pd2gs.train import TrainConfig
-    from rsart.io import atomic_write_text, write_json
 
     counts = [int(w) for w in args.workers.split(",") if w]
     if not counts or min(counts) < 1:
@@ -107,12 +106,10 @@ def main(argv: list[str] | None = None) -> int:
     for r in rows:
         lines.append(f"| {r['workers']} | {r['wall_s']:.1f} | {base / r['wall_s']:.2f} | {r['done']} | "
                      f"{', '.join(f'{x:.1f}' for x in r['load_after'])} |")
-    from common import report_paths
+    from common import write_report
 
-    md_path, json_path = report_paths(args.out)
-    md_path.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(md_path, "\n".join(lines) + "\n")
-    write_json(json_path, {"backend": args.backend, "objects": args.objects, "iters": args.iters, "rows": rows})
+    record = {"backend": args.backend, "objects": args.objects, "iters": args.iters, "rows": rows}
+    md_path, json_path = write_report(args.out, "\n".join(lines) + "\n", record)
     _say(f"wrote {md_path} and {json_path}")
     return 0
 

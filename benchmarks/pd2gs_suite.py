@@ -285,19 +285,14 @@ def main() -> int:
     res = run_all(data, ids, args.work, args.iters, abl, args.workers, args.backend, args.address, args.threads)
     scores = score(data, res["submissions"], args.work, ids)
     md = report(scores, res["timing"], args.work, ids, time.time() - t0, args.protocol)
-    from rsart.io import atomic_write_text, write_json
+    from common import write_report
 
-    from common import report_paths
-
-    md_path, json_path = report_paths(args.out)
-    md_path.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(md_path, md)
     per_object = {o["object_id"]: {k: o.get(k) for k in ("status", "metrics", "failures", "n_pred_movable",
                                                           "n_true_movable", "parts")}
                   for o in _objects(scores["default"])}
-    write_json(json_path, {"objects": ids, "timing": res["timing"], "per_object": per_object,
-                           "overall": {k: v["aggregate"]["overall"] for k, v in scores.items()},
-                           "categories": {k: v["aggregate"]["categories"] for k, v in scores.items()}})
+    write_report(args.out, md, {"objects": ids, "timing": res["timing"], "per_object": per_object,
+                                "overall": {k: v["aggregate"]["overall"] for k, v in scores.items()},
+                                "categories": {k: v["aggregate"]["categories"] for k, v in scores.items()}})
     _say(md)
     return 0
 

@@ -1,8 +1,10 @@
-"""benchmarks/common.py's cpu_description: timed results name the processor well enough to tell two
-"AMD EPYC" machines apart (one with AVX-512 ran the CPU rasterizer 3.5x faster than one without)."""
+"""benchmarks/common.py. cpu_description: timed results name the processor well enough to tell two
+"AMD EPYC" machines apart (one with AVX-512 ran the CPU rasterizer 3.5x faster than one without).
+write_report: a report's table and record never go to one file."""
 from __future__ import annotations
 
 import importlib.util
+import json
 import platform
 from pathlib import Path
 
@@ -49,3 +51,12 @@ def test_no_cpuinfo_falls_back_to_platform(tmp_path):
 
 def test_machine_record_uses_it():
     assert _common().machine(load=[1.0])["processor"] == _common().cpu_description()
+
+
+def test_write_report_never_writes_table_and_record_to_one_file(tmp_path):
+    """`--out x.json` used to write the markdown table to x.json and then replace it with the record."""
+    for name in ("r.md", "r.json", "r"):
+        md, js = _common().write_report(tmp_path / "out" / name, "| a |\n", {"k": 1})
+        assert (md, js) == (tmp_path / "out" / "r.md", tmp_path / "out" / "r.json")
+        assert md.read_text() == "| a |\n"
+        assert json.loads(js.read_text()) == {"k": 1}
