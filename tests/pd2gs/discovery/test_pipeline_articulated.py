@@ -262,7 +262,7 @@ def test_every_start_is_discovered_and_the_lowest_held_out_l1_kept(data):
 
     torch.set_num_threads(1)
     obj = rsart.load(data / "cabinet-0000")
-    fld, _ = perfect_field(obj.twin, obj.meta, STATES, n=1200, jitter=0.002)
+    fld, _ = perfect_field(obj.twin, obj.meta, STATES, n=600, jitter=0.002)
     fld = coloured(fld, obj)
     bg = tuple(float(c) for c in obj.states["m0"].views[0].rgb[0, 0] / 255.0)
     quick = dict(fit_max_side=48, background=bg, fit_iters=60, select=False, polish_iters=0)
