@@ -5,10 +5,12 @@ every state with a complexity penalty:
 
     score = L_heldout + penalty x C         (L = L1 mean per pixel and channel + the fit's silhouette weight x
                                              mean |alpha - mask| where masks are given; C = :func:`complexity`:
-                                             1 per movable body, 2 for a revolute one)
+                                             1 per movable body, 2 for a revolute one, 1 more
+                                             per body hung on a movable body)
 
 so an extra body must lower the held-out loss by more than ``penalty`` (twice that for a hinge)
-to stay, and a hinge must render better than a slide by ``penalty`` to stay a hinge. The held-out loss is
+to stay, a hinge must render better than a slide by ``penalty`` to stay a hinge, and a chain better than
+the flat tree by ``penalty`` to stay a chain. The held-out loss is
 the fit's own objective less SSIM (:func:`~.fit.evaluate_views`): a part that differs from the background
 only in shape, a white door before a white backdrop, is judged by its silhouette as it was fitted. The
 penalty is relative by default: ``penalty_rel`` (2 %) of the incumbent's held-out loss after its first re-fit (at least
@@ -61,8 +63,9 @@ class SelectConfig:
     after screening (None: all), screened on ``screen_views`` held-out views per state (None: all of them);
     ``max_rounds`` greedy rounds; an edit is taken only when it lowers the score by more than ``min_gain``
     (None: half the penalty)
-    (ties go to the incumbent: a swap or re-parent adds no body, so the penalty cannot stop it, and a short
-    re-fit's noise alone must not change the tree); ``type_check``: after the structure rounds, every
+    (ties go to the incumbent: a hinge swapped to a slide or a chain link moved onto the base lowers the
+    complexity, so the penalty alone cannot stop it, and a short re-fit's noise alone must not change the
+    tree); ``type_check``: after the structure rounds, every
     joint's type swap is re-fitted, unscreened, in rounds of its own; ``search_max_bodies``: re-parents found
     by the coarse search (:func:`searched_reparent`) are offered while the model has at most this many
     movable bodies (a compute budget: each is one coarse search, tens of seconds on 2 cores, and a tree of K
@@ -262,8 +265,12 @@ def swaps(model: ArticulatedGaussians, b: int, ref: int = 0, trajectories: np.nd
 def complexity(model: ArticulatedGaussians) -> int:
     """Penalty units of a model: 1 per movable body, 1 more per revolute joint (its pivot adds two free
     parameters to the two of an axis direction, which both types share), so a revolute joint that renders no
-    better than a slide (a hinge far away imitates one) loses to it."""
-    return sum(2 if t == "revolute" else 1 for t in model.joint_types)
+    better than a slide (a hinge far away imitates one) loses to it; and 1 more per body hung on a movable
+    body (a chain claims that one part carries another, a dependency the flat tree does not: where the two
+    render alike, two lids side by side, the flat tree wins; a flap carried by its lid renders far better
+    on the lid than on the base)."""
+    return (sum(2 if t == "revolute" else 1 for t in model.joint_types)
+            + sum(1 for p in model.parent[1:] if p > 0))
 
 
 def score(model: ArticulatedGaussians, frames: list[Frame], masks, cfg: SelectConfig) -> float:

@@ -9,8 +9,8 @@ from pd2gs.articulated.fit import FitConfig
 from pd2gs.articulated.model import ArticulatedGaussians, canonical_gaussians
 from pd2gs.articulated.scenes import make_scene, render_scene
 from pd2gs.articulated.search import ConsistencyViews, SearchConfig
-from pd2gs.articulated.select import (SelectConfig, candidates, rebuild, relative_joint, searched_reparent,
-                                      select_model)
+from pd2gs.articulated.select import (SelectConfig, candidates, complexity, rebuild, relative_joint,
+                                      searched_reparent, select_model)
 
 
 def gaussians_of(scene):
@@ -221,3 +221,14 @@ def test_selection_keeps_the_flat_tree_of_two_coaxial_half_lids(cfg):
     keeps = [e for e in sel.log if e["edit"] == "keep"]
     assert keeps and keeps[-1]["score"] <= sel.log[0]["score"]  # the incumbent itself re-fitted
     assert sel.score == pytest.approx(keeps[-1]["score"])
+
+
+def test_a_chain_link_costs_one_penalty_unit_more_than_the_flat_tree():
+    """The flap on the base and the flap on the lid have the same joints; the chain claims one dependency
+    more, so where both render alike the flat tree wins (woven_basket-0000's lids side by side)."""
+    scene = make_scene("flap", n=300)
+    flat = flat_flap_model(scene)
+    chained = rebuild(flat, [0, 1, 2], [-1, 0, 1], {2: relative_joint(flat, 2, 1, trajectories=trajectories(scene))})
+    assert flat.joint_types == chained.joint_types == ["revolute", "revolute"]
+    assert complexity(flat) == 4
+    assert complexity(chained) == complexity(flat) + 1
