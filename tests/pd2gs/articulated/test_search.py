@@ -141,3 +141,18 @@ def test_gaussians_do_not_drain_from_a_body_whose_joint_the_search_did_not_choos
     n_lid = int((scene.labels == 1).sum())
     drained = assign(model, views, 0.05)
     assert drained > 0.3 * n_lid and int((model.labels() == 1).sum()) == n_lid - drained
+
+
+def test_a_hinge_on_its_true_line_turned_the_wrong_way_gets_its_turn_back_by_rendering(lid):
+    """The lid on its true hinge line but turned -2 rad at the last state (truth +1.05): the rendered score
+    picks the far value on the 25-step grid nearest the truth (within one step, 15°), values on the ramp."""
+    from pd2gs.articulated.search import _ramp, rendered_turn
+
+    scene, frames, masks = lid
+    wrong = -2.0 * _ramp(4, 0)[:, None]
+    model = model_of(scene, scene.labels, ["revolute"], scene.axes, scene.pivots, wrong)
+    before, after = rendered_turn(model, 0, frames, masks, _ramp(4, 0), SearchConfig(**SMALL))
+    assert after < 0.5 * before
+    v = model.values[:, 0].detach().double().numpy()
+    assert abs(v[3] - scene.values[3, 0]) < math.radians(15) and v[0] == 0.0
+    assert np.allclose(v, v[3] * _ramp(4, 0))
