@@ -41,9 +41,15 @@ its cost is lowest, where that beats its current owner by ``margin`` (:func:`ass
 body whose joint the search chose or out of one to the base; ``rounds`` times. (Measured on stand-0000:
 re-assigning under joints the search had left alone drained 5874 of the parts' 7822 Gaussians to the
 base, since under a poor joint a part's Gaussians look better not moving, and the fit then turned the
-arm into a slide.) The whole result is kept only if the same cost, summed over every
-Gaussian under its owner, is lower on ``check_views`` held-out views per state than the starting model's
-(:func:`model_cost`). Forward projections only; the gradient fit (:mod:`.fit`) refines everything after.
+arm into a slide.)
+
+**Rendered turn and check.** The projection score finds a hinge's line but can be fooled on its turn, so
+each hinge the search chose has its far value chosen again by rendering (:func:`rendered_turn`), and the
+whole result is kept only if the model's rendered held-out loss (:func:`rendered_loss` on every held-out
+view: what model selection scores) is lower than the starting model's. With ``turn_views`` = 0 the
+projection score's turn is kept and the check is the projection cost, summed over every Gaussian under
+its owner, on ``check_views`` held-out views per state (:func:`model_cost`). The gradient fit
+(:mod:`.fit`) refines everything after.
 """
 from __future__ import annotations
 
