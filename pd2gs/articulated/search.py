@@ -62,6 +62,7 @@ import torch.nn.functional as F
 
 from pd2gs.data import Frame
 
+from .fit import evaluate_views
 from .model import ArticulatedGaussians, axis_angle_matrix
 from .ownership import move_to_cheapest, view_subset
 
@@ -409,21 +410,14 @@ def assign(model: ArticulatedGaussians, views: ConsistencyViews, margin: float, 
     return move_to_cheapest(model, c, margin, confidence)
 
 
-@torch.no_grad()
 def rendered_loss(model: ArticulatedGaussians, frames: list[Frame], idx: list[int], masks, cfg: SearchConfig
                   ) -> float:
-    """Mean over the frames ``idx`` of the model's render's L1 colour error plus ``cfg.silhouette`` x the
-    mean |alpha - mask| (where the frame has a mask): the held-out score of model selection."""
-    bg = torch.tensor(cfg.background)
-    total = 0.0
-    for i in idx:
-        f = frames[i]
-        out = model.render(f.state, f.K, f.w2c, *f.size, background=bg, backend=cfg.backend)
-        total += float((out.rgb - f.rgb).abs().mean())
-        m = masks[i] if masks is not None else None
-        if m is not None and cfg.silhouette > 0:
-            total += cfg.silhouette * float((out.alpha - m).abs().mean())
-    return total / max(1, len(idx))
+    """:func:`.fit.evaluate_views` (render L1 + ``cfg.silhouette`` x |alpha - mask|, what model selection
+    scores) on the frames ``idx``."""
+    sub = [frames[i] for i in idx]
+    split = sub[0].split if sub else "train"
+    return evaluate_views(model, sub, split, cfg.background, cfg.backend,
+                          None if masks is None else [masks[i] for i in idx], cfg.silhouette)
 
 
 @torch.no_grad()
@@ -438,12 +432,7 @@ def rendered_turn(model: ArticulatedGaussians, j: int, frames: list[Frame], mask
     way still lands inside the silhouette on colours like its own. A render also sees what the posed part
     hides and uncovers."""
     moved = set(np.flatnonzero(ramp != 0).tolist())
-    per: dict[int, list[int]] = {}
-    for i, f in enumerate(frames):
-        if f.split == "train" and f.state in moved:
-            per.setdefault(f.state, []).append(i)
-    idx = [own[k] for own in per.values()
-           for k in np.unique(np.linspace(0, len(own) - 1, min(cfg.turn_views, len(own))).round().astype(int))]
+    idx = [i for i in view_subset(frames, "train", cfg.turn_views * len(ramp)) if frames[i].state in moved]
     cur = model.values.data[:, j].clone()
     start = rendered_loss(model, frames, idx, masks, cfg)
     best, best_v = start, cur
