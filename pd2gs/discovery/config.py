@@ -202,6 +202,11 @@ class DiscoveryConfig:
     """Adam steps of each candidate's re-fit."""
     select_rounds: int = 6
     """at most this many accepted edits."""
+    select_top: int = 3
+    """candidates per round re-fitted (``select_iters`` steps) after screening by their score as built."""
+    select_search_bodies: int = 0
+    """re-parents found by the coarse joint search are offered while the model has at most this many movable
+    bodies (0: none; each is one search, tens of seconds)."""
     final_iters: int = 300
     """Adam steps of the fit after selection (0: none)."""
     polish_iters: int = 600
