@@ -205,6 +205,38 @@ def test_interrupted_run_resumes_to_the_same_submission(data, reference, tmp_pat
     _assert_same_submission(reference, out / "submission")
 
 
+def _alive(pid: int) -> bool:
+    """True while ``pid`` runs (a zombie no reaper collected counts as ended)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except (OSError, IndexError):
+        return False
+
+
+@pytest.mark.slow
+def test_terminated_run_stops_its_workers(data, tmp_path):
+    """SIGTERM (``kill``) to the driver ends the run as Ctrl-C does: its workers stop with it instead of
+    running on, orphaned, into the run folders."""
+    out = tmp_path / "terminated"
+    proc = subprocess.Popen(_cmd(data, out, "--backend", "process", "--workers", "2"), stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=_env())
+    try:
+        _, doc = _wait_for_stage(out, proc, ("train",))
+        worker = doc["pid"]
+        assert worker != proc.pid and _alive(worker)
+        proc.terminate()
+        _, stderr = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, stderr[-2000:]
+    assert "interrupted" in stderr and "Traceback" not in stderr
+    t0 = time.time()
+    while _alive(worker) and time.time() - t0 < 30:
+        time.sleep(0.2)
+    assert not _alive(worker), f"worker {worker} still runs after its driver was terminated"
+
+
 def test_ray_backend_without_ray_says_how_to_install_it(tmp_path):
     fake = tmp_path / "noray" / "ray"
     fake.mkdir(parents=True)
