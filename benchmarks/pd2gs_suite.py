@@ -57,7 +57,6 @@ ABLATIONS = {  # name -> DiscoveryConfig overrides (same trained field)
     "canonical-start": {"canonical": "start"},  # the start state's Gaussians as the canonical geometry (until 2026-11-27)
     # selection's finalists (2 per round) re-fitted 600 steps, searched re-parents while <= 2 movable bodies
     "long-select": {"select_iters": 600, "select_top": 2, "select_search_bodies": 2},
-    "split": {"select_split": True},  # + split edits: a body's Gaussians in two by stage 1's rigid motions
 }
 
 

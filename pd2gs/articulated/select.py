@@ -29,12 +29,6 @@ loop applies the best edit while it improves the score:
   :func:`pd2gs.kinematics.estimate_joint` on b's centres seen in p's frame in every state.
 * ``swap(b)``: b's joint type changes (revolute <-> prismatic), parameters from discovery's Kabsch fit
   (``robust_rigid`` + ``revolute_params`` / ``prismatic_params``) on the same centres.
-* ``split(b)``: b's Gaussians in two groups by their rigid motions in stage 1's centres (the ``splitter``
-  the caller gives: discovery passes :func:`pd2gs.discovery.motion.cluster_rigid_motions`); the group that
-  b's joint places worse becomes a new body beside b, its joint read off its centres in the parent's frame
-  (and, with the coarse search on, also found by it). The counter and the initial clusters see the same
-  noisy centres, so two lids that stage 1 moved alike can end in one body; only selection sees whether the
-  images want them apart. Offered only when a ``splitter`` and the trajectories are given.
 
 After the structure rounds, a **type phase** (``type_check``) runs rounds of swaps only, every one re-fitted
 (none screened out): a joint of the other type built from a fit of one type renders poorly until it is
@@ -47,7 +41,6 @@ from __future__ import annotations
 import copy
 import dataclasses
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 import torch
@@ -58,10 +51,7 @@ from pd2gs.kinematics import estimate_joint, prismatic_params, revolute_params, 
 from .fit import FitConfig, evaluate_views, fit_articulated
 from .model import ArticulatedGaussians
 from .ownership import view_subset
-from .search import ConsistencyViews, Hypothesis, SearchConfig, _ramp, _set_joint, search_body
-
-Splitter = Callable[[np.ndarray], np.ndarray]
-"""(S, n, 3) centres of n Gaussians in every state -> (n,) group labels, 1 and 2 for two rigid motions."""
+from .search import ConsistencyViews, SearchConfig, _ramp, _set_joint, search_body
 
 
 @dataclass
@@ -198,12 +188,10 @@ def relative_joint(model: ArticulatedGaussians, b: int, p: int, ref: int = 0,
 
 
 def candidates(model: ArticulatedGaussians, ref: int = 0, trajectories: np.ndarray | None = None,
-               search: tuple[ConsistencyViews, SearchConfig] | None = None, splitter: Splitter | None = None
-               ) -> list[tuple[dict, ArticulatedGaussians]]:
+               search: tuple[ConsistencyViews, SearchConfig] | None = None) -> list[tuple[dict, ArticulatedGaussians]]:
     """Every one-step edit of ``model``: merges of siblings, prunes of leaves, joint-type swaps, re-parents
     to non-descendants (each twice when ``search`` = (views, config) is given: its joint read off the
-    trajectories, and found by :func:`searched_reparent`), and splits (:func:`splits`, with a ``splitter``
-    and ``trajectories``)."""
+    trajectories, and found by :func:`searched_reparent`)."""
     n, parent = model.num_bodies, list(model.parent)
     out = []
     ident = list(range(n))
@@ -223,8 +211,6 @@ def candidates(model: ArticulatedGaussians, ref: int = 0, trajectories: np.ndarr
                 owner[b] = a
                 out.append(({"edit": "merge", "body": b, "into": a}, rebuild(model, owner, parent)))
         out += swaps(model, b, ref, trajectories)
-        if splitter is not None and trajectories is not None:
-            out += splits(model, b, trajectories, splitter, ref, search)
         for p in range(1, n):
             descendants = {b}
             for c in range(1, n):  # parents precede children, one pass suffices
@@ -259,68 +245,6 @@ def searched_reparent(model: ArticulatedGaussians, b: int, p: int, ref: int, vie
     _, _, h = search_body(cand, nb, views, _ramp(model.num_states, ref), cfg)
     _set_joint(cand, nb - 1, *h)
     return cand
-
-
-def split_body(model: ArticulatedGaussians, b: int, moved: np.ndarray, joint: Hypothesis) -> ArticulatedGaussians:
-    """A new model where the Gaussians ``moved`` ((N,) bool, owned by b) belong to a new last body, a
-    sibling of b (same parent) with ``joint`` = (type, axis (3,), pivot (3,), values (S,)) relative to that
-    parent. Their logit for b goes to the new body and b's becomes the row's lowest; every other Gaussian's
-    logit for the new body is its lowest, so soft weights elsewhere barely change."""
-    logits = model.ownership_logits.detach().clone()
-    low = logits.min(dim=1).values
-    sel = torch.as_tensor(moved)
-    col = low.clone()
-    col[sel] = logits[sel, b]
-    logits[sel, b] = low[sel]
-    t, a, p, v = joint
-    S = model.num_states
-    return ArticulatedGaussians(copy.deepcopy(model.gaussians), list(model.parent) + [model.parent[b]],
-                                list(model.joint_types) + [t],
-                                np.vstack([model.axes.detach().numpy(), np.asarray(a, dtype=np.float64)[None]]),
-                                np.vstack([model.pivots.detach().numpy(), np.asarray(p, dtype=np.float64)[None]]),
-                                np.hstack([model.values.detach().numpy(), np.asarray(v, dtype=np.float64).reshape(S, 1)]),
-                                torch.cat([logits, col[:, None]], dim=1), temperature=model.temperature)
-
-
-def splits(model: ArticulatedGaussians, b: int, trajectories: np.ndarray, splitter: Splitter, ref: int = 0,
-           search: tuple[ConsistencyViews, SearchConfig] | None = None, min_frac: float = 0.1,
-           min_size: int = 20) -> list[tuple[dict, ArticulatedGaussians]]:
-    """Body b split in two by ``splitter`` on its Gaussians' stage-1 centres (``trajectories`` (S, N, 3)):
-    the group whose centres b's joint misplaces more (median over the group and the states) becomes the new
-    body, its joint read off those centres in the parent's frame (:func:`relative_joint`, the BIC type) and,
-    with ``search`` = (views, config), also found by the coarse search. Nothing when either group holds
-    fewer than ``min_frac`` of b's Gaussians or ``min_size``."""
-    with torch.no_grad():
-        own = (model.labels() == b).numpy()
-        idx = np.flatnonzero(own)
-        if len(idx) < 2 * min_size:
-            return []
-        traj = np.asarray(trajectories)[:, idx]
-        groups = np.asarray(splitter(traj))
-        sizes = [int((groups == g).sum()) for g in (1, 2)]
-        if min(sizes) < max(min_size, min_frac * len(idx)):
-            return []
-        err = []
-        for s in range(model.num_states):
-            bp = model.body_poses(s)
-            x = (bp.R[b] @ model.gaussians.means[idx].T).T + bp.t[b]
-            err.append(np.linalg.norm(x.double().numpy() - traj[s], axis=1))
-        err = np.stack(err)  # (S, n) distance of b's posed centres from stage 1's
-        worse = max((1, 2), key=lambda g: float(np.median(err[:, groups == g])))
-    moved = np.zeros(model.gaussians.num, dtype=bool)
-    moved[idx[groups == worse]] = True
-    placeholder = (model.joint_types[b - 1], model.axes[b - 1].detach().numpy(), model.pivots[b - 1].detach().numpy(),
-                   model.values[:, b - 1].detach().numpy())
-    draft = split_body(model, b, moved, placeholder)
-    nb = draft.num_bodies - 1
-    out = [({"edit": "split", "body": b, "size": int(moved.sum()), "from": "trajectories"},
-            split_body(model, b, moved, relative_joint(draft, nb, model.parent[b], ref, trajectories)))]
-    if search is not None:
-        cand = copy.deepcopy(out[0][1])
-        _, _, h = search_body(cand, nb, search[0], _ramp(model.num_states, ref), search[1])
-        _set_joint(cand, nb - 1, *h)
-        out.append(({"edit": "split", "body": b, "size": int(moved.sum()), "from": "search"}, cand))
-    return out
 
 
 def swaps(model: ArticulatedGaussians, b: int, ref: int = 0, trajectories: np.ndarray | None = None
@@ -359,12 +283,10 @@ def score(model: ArticulatedGaussians, frames: list[Frame], masks, cfg: SelectCo
 
 
 def select_model(model: ArticulatedGaussians, frames: list[Frame], masks=None, cfg: SelectConfig | None = None,
-                 trajectories: np.ndarray | None = None, splitter: Splitter | None = None) -> Selection:
+                 trajectories: np.ndarray | None = None) -> Selection:
     """Greedy model selection from a fitted ``model`` (see module doc). Candidates are re-fitted with
     ``cfg.refit`` on the train views; the incumbent is re-fitted the same way so scores compare.
-    ``trajectories``: stage 1's (S, N, 3) per-state centres for re-parenting (see :func:`relative_joint`) and
-    splitting; ``splitter``: groups a body's Gaussians by rigid motion (:data:`Splitter`; None: no split
-    edits)."""
+    ``trajectories``: stage 1's (S, N, 3) per-state centres for re-parenting (see :func:`relative_joint`)."""
     cfg = cfg or SelectConfig()
     if not any(f.split == "test" for f in frames):
         raise ValueError("frames: model selection needs held-out views (split 'test'); none given")
@@ -391,7 +313,7 @@ def select_model(model: ArticulatedGaussians, frames: list[Frame], masks=None, c
             scfg = SearchConfig()
             search = (ConsistencyViews(frames, masks, model.num_states, "train", scfg.views_per_state, scfg.tau_px),
                       scfg)
-        cands = candidates(best, ref, trajectories, search if searched else None, splitter)
+        cands = candidates(best, ref, trajectories, search if searched else None)
         if cfg.refit_top is not None and len(cands) > cfg.refit_top:
             screened = sorted(((score(c, screen, screen_masks, cfg), i) for i, (_, c) in enumerate(cands)))
             for sc, i in screened:

@@ -207,9 +207,6 @@ class DiscoveryConfig:
     select_search_bodies: int = 0
     """re-parents found by the coarse joint search are offered while the model has at most this many movable
     bodies (0: none; each is one search, tens of seconds)."""
-    select_split: bool = False
-    """offer split edits: a body's Gaussians in two groups by the rigid motions of their stage-1 centres, the
-    second group a new body (pd2gs/articulated/select.py). Off until measured on the whole split."""
     final_iters: int = 300
     """Adam steps of the fit after selection (0: none)."""
     polish_iters: int = 600

@@ -309,18 +309,12 @@ def select(d: Discovery) -> None:
                        SelectConfig(penalty_rel=d.cfg.select_penalty_rel, refit=fit_config(d, d.cfg.select_iters),
                                     max_rounds=d.cfg.select_rounds, refit_top=d.cfg.select_top,
                                     search_max_bodies=d.cfg.select_search_bodies),
-                       d.stage1_means, split_groups(d.cfg) if d.cfg.select_split else None)
+                       d.stage1_means)
     d.model = sel.model
     d.diag["select"] = {"seconds": time.perf_counter() - t0, "score": sel.score, "log": sel.log}
     if d.cfg.final_iters > 0:
         res = fit_articulated(d.model, d.frames, d.masks, fit_config(d, d.cfg.final_iters))
         d.diag["final_fit"] = {"seconds": res.seconds, "loss_first_last": [res.losses[0], res.losses[-1]]}
-
-
-def split_groups(cfg: DiscoveryConfig):
-    """Selection's splitter: (S, n, 3) stage-1 centres -> (n,) labels 1, 2 of two rigid motions
-    (:func:`.motion.cluster_rigid_motions`, the initial clusters' own grouping)."""
-    return lambda traj: motion.cluster_rigid_motions(traj, 2, cfg.min_cluster_frac, cfg.kmeans_seed, cfg.kmeans_n_init)
 
 
 @torch.no_grad()

@@ -10,8 +10,7 @@ from pd2gs.articulated.model import ArticulatedGaussians, canonical_gaussians
 from pd2gs.articulated.scenes import make_scene, render_scene
 from pd2gs.articulated.search import ConsistencyViews, SearchConfig
 from pd2gs.articulated.select import (SelectConfig, candidates, complexity, rebuild, relative_joint,
-                                      searched_reparent, select_model, splits)
-from pd2gs.discovery.motion import cluster_rigid_motions
+                                      searched_reparent, select_model)
 
 
 def gaussians_of(scene):
@@ -233,49 +232,3 @@ def test_a_chain_link_costs_one_penalty_unit_more_than_the_flat_tree():
     assert flat.joint_types == chained.joint_types == ["revolute", "revolute"]
     assert complexity(flat) == 4
     assert complexity(chained) == complexity(flat) + 1
-
-
-def one_body_twin(scene):
-    """The twin scene as a counter that saw one motion gives it: both half lids one body, on the first
-    half's joint."""
-    return ArticulatedGaussians(gaussians_of(scene), [-1, 0], ["revolute"], scene.axes[:1], scene.pivots[:1],
-                                scene.values[:, :1], (scene.labels > 0).long())
-
-
-def rigid_split(traj):
-    return cluster_rigid_motions(traj, 2, seed=0)
-
-
-def test_a_split_gives_the_half_lid_its_own_joint_where_one_body_held_both():
-    scene = make_scene("twin", n=900)
-    model = one_body_twin(scene)
-    offered = splits(model, 1, trajectories(scene), rigid_split)
-    assert [e["edit"] for e, _ in offered] == ["split"]
-    edit, cand = offered[0]
-    assert cand.num_bodies == 3 and cand.parent == [-1, 0, 0]
-    assert edit["size"] == int((scene.labels == 2).sum())  # the half the kept joint misplaces moves out
-    np.testing.assert_array_equal(cand.labels().numpy(), scene.labels.numpy())
-    assert cand.joint_types[1] == "revolute"
-    np.testing.assert_allclose(cand.values[:, 1].detach().numpy(), scene.values[:, 1], atol=1e-4)
-    cand.harden()
-    for s in range(4):  # the split model poses every Gaussian as the twin does
-        assert torch.allclose(cand.pose(s)[0], scene.posed_means(s), atol=1e-4)
-    # the candidates carry it only with a splitter; a body of one rigid motion is not split
-    assert not [e for e, _ in candidates(model, trajectories=trajectories(scene)) if e["edit"] == "split"]
-    assert [e for e, _ in candidates(model, trajectories=trajectories(scene), splitter=rigid_split)
-            if e["edit"] == "split"]
-    lid = make_scene("lid", n=900)
-    assert splits(truth_model(lid), 1, trajectories(lid), rigid_split) == []
-
-
-@pytest.mark.slow
-def test_selection_splits_one_body_holding_two_half_lids(cfg):
-    torch.set_num_threads(1)
-    scene = make_scene("twin", n=1200)
-    frames, masks = render_scene(scene, views=8, size=(48, 36))
-    sel = select_model(one_body_twin(scene), frames, masks, cfg, trajectories(scene), rigid_split)
-    assert sel.model.num_bodies == 3, sel.log
-    assert sel.model.joint_types == ["revolute", "revolute"], sel.log
-    assert any(e.get("chosen") and e["edit"] == "split" for e in sel.log)
-    agree = (sel.model.labels() == scene.labels).float().mean()
-    assert agree > 0.95
