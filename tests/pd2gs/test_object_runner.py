@@ -173,6 +173,16 @@ def test_killed_process_worker_is_retried_and_the_submission_is_the_same(data, r
     _assert_same_submission(reference, out / "submission")
 
 
+def _stop(proc: subprocess.Popen, sig: int) -> str:
+    """Send ``sig`` to the running driver and wait for it; -> its stderr, once it ended as an interrupt does
+    (exit 130, a one-line message, no traceback). The caller kills it in a ``finally`` if it did not end."""
+    proc.send_signal(sig)
+    _, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 130, stderr[-2000:]
+    assert "interrupted" in stderr and "Traceback" not in stderr
+    return stderr
+
+
 @pytest.mark.slow
 def test_interrupted_run_resumes_to_the_same_submission(data, reference, tmp_path):
     out = tmp_path / "interrupted"
@@ -186,13 +196,10 @@ def test_interrupted_run_resumes_to_the_same_submission(data, reference, tmp_pat
         while not list(out.glob("runs/*/metrics.json")):  # the first object's training stage is finished
             assert proc.poll() is None and time.time() - t0 < 600
             time.sleep(0.2)
-        proc.send_signal(signal.SIGINT)  # Ctrl-C
-        _, stderr = proc.communicate(timeout=120)
+        _stop(proc, signal.SIGINT)  # Ctrl-C
     finally:
         if proc.poll() is None:
             proc.kill()
-    assert proc.returncode == 130, stderr[-2000:]
-    assert "interrupted" in stderr and "Traceback" not in stderr
     assert not (out / "submission").exists()
     trained = [p.parent.name for p in out.glob("runs/*/metrics.json")]
     r = _run(data, out, "--backend", "process", "--workers", "1")
@@ -224,13 +231,10 @@ def test_terminated_run_stops_its_workers(data, tmp_path):
         _, doc = _wait_for_stage(out, proc, ("train",))
         worker = doc["pid"]
         assert worker != proc.pid and _alive(worker)
-        proc.terminate()
-        _, stderr = proc.communicate(timeout=120)
+        _stop(proc, signal.SIGTERM)  # kill
     finally:
         if proc.poll() is None:
             proc.kill()
-    assert proc.returncode == 130, stderr[-2000:]
-    assert "interrupted" in stderr and "Traceback" not in stderr
     t0 = time.time()
     while _alive(worker) and time.time() - t0 < 30:
         time.sleep(0.2)
