@@ -61,7 +61,8 @@ class SelectConfig:
     unchanged model on the synthetic scenes); ``refit`` the fit used on the screened
     candidates (its ``iters`` are the short re-fit); ``refit_top`` how many candidates per round are re-fitted
     after screening (None: all), screened on ``screen_views`` held-out views per state (None: all of them);
-    ``max_rounds`` greedy rounds; an edit is taken only when it lowers the score by more than ``min_gain``
+    ``max_rounds`` greedy rounds (None: the movable bodies of the model entering selection + 2, since every
+    merge or prune removes one body; a fixed 6 stopped drawer-0000's seven bodies at three); an edit is taken only when it lowers the score by more than ``min_gain``
     (None: half the penalty)
     (ties go to the incumbent: a hinge swapped to a slide or a chain link moved onto the base lowers the
     complexity, so the penalty alone cannot stop it, and a short re-fit's noise alone must not change the
@@ -76,7 +77,7 @@ class SelectConfig:
     penalty_rel: float = 0.02
     penalty_min: float = 1e-4
     refit: FitConfig = field(default_factory=lambda: FitConfig(iters=120))
-    max_rounds: int = 6
+    max_rounds: int | None = None
     refit_top: int | None = 3
     screen_views: int | None = 2
     min_gain: float | None = None
@@ -262,6 +263,11 @@ def swaps(model: ArticulatedGaussians, b: int, ref: int = 0, trajectories: np.nd
             for src, traj in sources]
 
 
+def rounds_for(model: ArticulatedGaussians, cfg: SelectConfig) -> int:
+    """Rounds of each phase: ``cfg.max_rounds``, or (None) the model's movable bodies + 2."""
+    return cfg.max_rounds if cfg.max_rounds is not None else model.num_bodies - 1 + 2
+
+
 def complexity(model: ArticulatedGaussians) -> int:
     """Penalty units of a model: 1 per movable body, 1 more per revolute joint (its pivot adds two free
     parameters to the two of an axis direction, which both types share), so a revolute joint that renders no
@@ -307,7 +313,8 @@ def select_model(model: ArticulatedGaussians, frames: list[Frame], masks=None, c
     sel = Selection(best, best_score, [{"edit": "start", "bodies": best.num_bodies, "score": best_score,
                                         "penalty": cfg.penalty}])
     search = None  # (views, config) of the searched re-parents, built on first use (off by default)
-    for _ in range(cfg.max_rounds):
+    rounds = rounds_for(model, cfg)
+    for _ in range(rounds):
         searched = best.num_bodies - 1 <= cfg.search_max_bodies
         if searched and search is None:
             scfg = SearchConfig()
@@ -327,7 +334,7 @@ def select_model(model: ArticulatedGaussians, frames: list[Frame], masks=None, c
     # every joint's other type, re-fitted: a swap built from a fit of one type renders poorly before its
     # own re-fit, so screening by the score as built drops it (measured: drawer-0001's drawers stayed hinges
     # 1 m away whose swaps never reached the re-fitted three)
-    for _ in range(cfg.max_rounds if cfg.type_check else 0):
+    for _ in range(rounds if cfg.type_check else 0):
         sizes = np.bincount(best.labels().numpy(), minlength=best.num_bodies)
         cands = [c for b in range(1, best.num_bodies) if sizes[b] >= 3 for c in swaps(best, b, ref, trajectories)]
         if not cands:

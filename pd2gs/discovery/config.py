@@ -200,8 +200,9 @@ class DiscoveryConfig:
     |alpha - mask|) of the model entering selection (pd2gs/articulated/select.py)."""
     select_iters: int = 120
     """Adam steps of each candidate's re-fit."""
-    select_rounds: int = 6
-    """at most this many accepted edits."""
+    select_rounds: int | None = None
+    """at most this many accepted edits in each phase (None: the movable bodies entering selection + 2, as
+    every merge or prune removes one; measured: a fixed 6 left drawer-0000 with three bodies for two)."""
     select_top: int = 3
     """candidates per round re-fitted (``select_iters`` steps) after screening by their score as built."""
     select_search_bodies: int = 0

@@ -95,6 +95,26 @@ def test_selection_merges_an_over_segmented_lid_into_one_part(cfg):
 
 
 @pytest.mark.slow
+def test_selection_merges_a_lid_cut_into_eight_pieces_past_the_old_fixed_cap(cfg):
+    """Seven merges are needed; the rounds scale with the bodies entering selection (a fixed 6 used to stop
+    drawer-0000's seven bodies at three)."""
+    torch.set_num_threads(1)
+    scene = make_scene("lid", n=1200)
+    frames, masks = render_scene(scene, views=8, size=(48, 36))
+    lab = scene.labels.clone()
+    lid = torch.nonzero(lab == 1).squeeze(1)
+    for i, piece in enumerate(torch.chunk(lid[torch.argsort(scene.means[lid, 0])], 8)):  # 8 slices along x
+        lab[piece] = 1 + i
+    k = int(lab.max())
+    assert k == 8 and all(int((lab == b).sum()) > 30 for b in range(1, 9))
+    model = ArticulatedGaussians(gaussians_of(scene), [-1] + [0] * k, ["revolute"] * k,
+                                 np.tile(scene.axes, (k, 1)), np.tile(scene.pivots, (k, 1)),
+                                 np.tile(scene.values, (1, k)), lab)
+    sel = select_model(model, frames, masks, cfg, trajectories(scene))
+    assert sel.model.num_bodies == 2, [(e["edit"], e.get("score")) for e in sel.log if e.get("chosen")]
+
+
+@pytest.mark.slow
 def test_selection_hangs_the_flap_on_the_lid(cfg):
     torch.set_num_threads(1)
     scene = make_scene("flap", n=1200)
