@@ -300,4 +300,8 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    try:
+        sys.exit(main())
+    except KeyboardInterrupt:  # Ctrl-C or SIGTERM (the runner stops its workers first)
+        print("interrupted; a rerun with the same --work resumes from the finished stages", file=sys.stderr)
+        sys.exit(130)
