@@ -536,7 +536,10 @@ def method_block(cfg: DiscoveryConfig, states_used: int | None = None) -> dict:
                               "joint_rule": cfg.joint_rule or "paper"} if cfg.mode == "paper" else
                              {"silhouette": cfg.fit_silhouette, "depth": cfg.fit_depth, "select": cfg.select,
                               "fit_max_side": cfg.fit_max_side, "fit_iters": cfg.fit_iters,
-                              "select_penalty_rel": cfg.select_penalty_rel, "final_iters": cfg.final_iters,
+                              "select_penalty_rel": cfg.select_penalty_rel, "select_iters": cfg.select_iters,
+                              "select_rounds": cfg.select_rounds, "select_top": cfg.select_top,
+                              "select_search_bodies": cfg.select_search_bodies, "canonical": cfg.canonical,
+                              "seed": cfg.seed, "final_iters": cfg.final_iters,
                               "polish_iters": cfg.polish_iters, "polish_max_side": cfg.polish_max_side,
                               "joint_rule": cfg.joint_rule or "bic", "starts": cfg.starts,
                               "restarts": cfg.restarts})}}

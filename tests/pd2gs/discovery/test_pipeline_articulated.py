@@ -300,6 +300,14 @@ def test_every_start_is_discovered_and_the_lowest_held_out_l1_kept(data):
     assert block["starts"] == "kabsch,search" and block["restarts"] == 2
 
 
+def test_the_method_block_records_selections_settings():
+    """Two submissions that differ only in selection's settings or the seed can be told apart."""
+    sel = method_block(DiscoveryConfig(select_iters=600, select_top=2, select_search_bodies=2, select_rounds=9,
+                                       seed=1))["discovery"]
+    assert (sel["select_iters"], sel["select_top"], sel["select_search_bodies"], sel["select_rounds"],
+            sel["seed"], sel["canonical"]) == (600, 2, 2, 9, 1, "widest")
+
+
 @pytest.mark.parametrize("starts", ["", "kabsch,kabsch", "grid"])
 def test_bad_starts_are_refused_by_name(starts):
     from pd2gs.config_cli import ConfigError
