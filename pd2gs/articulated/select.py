@@ -71,7 +71,9 @@ class SelectConfig:
     by the coarse search (:func:`searched_reparent`) are offered while the model has at most this many
     movable bodies (a compute budget: each is one coarse search, tens of seconds on 2 cores, and a tree of K
     bodies has K(K-1) re-parents). Off (0) by default until measured on the whole split: with 3 the test
-    suite slowed markedly, and on 5 fields it fixed one stand and added a spurious chain to a refrigerator."""
+    suite slowed markedly, and on 5 fields it fixed one stand and added a spurious chain to a refrigerator.
+    ``keep_count``: no merges or prunes are offered (the number of bodies was given, ``--counter given``);
+    selection then chooses only types and parents."""
 
     penalty: float | None = None
     penalty_rel: float = 0.02
@@ -83,6 +85,7 @@ class SelectConfig:
     min_gain: float | None = None
     type_check: bool = True
     search_max_bodies: int = 0
+    keep_count: bool = False
 
 
 @dataclass
@@ -189,23 +192,25 @@ def relative_joint(model: ArticulatedGaussians, b: int, p: int, ref: int = 0,
 
 
 def candidates(model: ArticulatedGaussians, ref: int = 0, trajectories: np.ndarray | None = None,
-               search: tuple[ConsistencyViews, SearchConfig] | None = None) -> list[tuple[dict, ArticulatedGaussians]]:
-    """Every one-step edit of ``model``: merges of siblings, prunes of leaves, joint-type swaps, re-parents
-    to non-descendants (each twice when ``search`` = (views, config) is given: its joint read off the
-    trajectories, and found by :func:`searched_reparent`)."""
+               search: tuple[ConsistencyViews, SearchConfig] | None = None, keep_count: bool = False
+               ) -> list[tuple[dict, ArticulatedGaussians]]:
+    """Every one-step edit of ``model``: merges of siblings, prunes of leaves (neither when ``keep_count``),
+    joint-type swaps, re-parents to non-descendants (each twice when ``search`` = (views, config) is given:
+    its joint read off the trajectories, and found by :func:`searched_reparent`)."""
     n, parent = model.num_bodies, list(model.parent)
     out = []
     ident = list(range(n))
     sizes = np.bincount(model.labels().numpy(), minlength=n)
     for b in range(1, n):
-        if not _children(parent, b):
+        if not _children(parent, b) and not keep_count:
             owner = ident.copy()
             owner[b] = parent[b]
             out.append(({"edit": "prune", "body": b}, rebuild(model, owner, parent)))
         if sizes[b] < 3:  # (nearly) empty: no motion to re-estimate, only pruning or merging it makes sense
             continue
         for a in range(1, n):
-            if a != b and parent[a] == parent[b] and not _children(parent, b) and sizes[a] >= sizes[b]:
+            if (a != b and parent[a] == parent[b] and not _children(parent, b) and sizes[a] >= sizes[b]
+                    and not keep_count):
                 if sizes[a] == sizes[b] and a > b:
                     continue
                 owner = ident.copy()
@@ -320,7 +325,7 @@ def select_model(model: ArticulatedGaussians, frames: list[Frame], masks=None, c
             scfg = SearchConfig()
             search = (ConsistencyViews(frames, masks, model.num_states, "train", scfg.views_per_state, scfg.tau_px),
                       scfg)
-        cands = candidates(best, ref, trajectories, search if searched else None)
+        cands = candidates(best, ref, trajectories, search if searched else None, cfg.keep_count)
         if cfg.refit_top is not None and len(cands) > cfg.refit_top:
             screened = sorted(((score(c, screen, screen_masks, cfg), i) for i, (_, c) in enumerate(cands)))
             for sc, i in screened:

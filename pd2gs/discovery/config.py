@@ -96,7 +96,8 @@ class DiscoveryConfig:
     # --- how many parts
     counter: Literal["trajectory", "motion", "vlm", "given"] = "trajectory"
     """part counter: "trajectory" local rigid motions + silhouette (default, ours); "motion" rigid RANSAC
-    (ours); "vlm" the paper's; "given" the oracle count from meta.json."""
+    (ours); "vlm" the paper's; "given" the oracle count from meta.json (in mode articulated, model selection
+    then keeps that count: no merges or prunes, only types and parents)."""
     count_min_opacity: float = 0.3
     """ours: only Gaussians at least this opaque vote on the part count."""
     min_silhouette: float = 0.35

@@ -308,7 +308,8 @@ def select(d: Discovery) -> None:
     sel = select_model(d.model, d.frames, d.masks,
                        SelectConfig(penalty_rel=d.cfg.select_penalty_rel, refit=fit_config(d, d.cfg.select_iters),
                                     max_rounds=d.cfg.select_rounds, refit_top=d.cfg.select_top,
-                                    search_max_bodies=d.cfg.select_search_bodies),
+                                    search_max_bodies=d.cfg.select_search_bodies,
+                                    keep_count=d.cfg.counter == "given"),
                        d.stage1_means)
     d.model = sel.model
     d.diag["select"] = {"seconds": time.perf_counter() - t0, "score": sel.score, "log": sel.log}

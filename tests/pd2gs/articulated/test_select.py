@@ -62,6 +62,9 @@ def test_rebuild_reparents_and_merges_without_changing_the_truths_poses():
     edits = sorted(e["edit"] for e, _ in candidates(flat, trajectories=trajectories(scene)))
     # swaps to prismatic come twice: read off stage 1's trajectories and off the model's own posed motion
     assert edits == ["merge", "prune", "prune", "reparent", "reparent", "swap", "swap", "swap", "swap"]
+    # with the count given, the edits that change it are not offered
+    kept = sorted(e["edit"] for e, _ in candidates(flat, trajectories=trajectories(scene), keep_count=True))
+    assert kept == ["reparent", "reparent", "swap", "swap", "swap", "swap"]
 
 
 @pytest.fixture(scope="module")
