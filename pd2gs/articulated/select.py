@@ -62,8 +62,8 @@ class SelectConfig:
     candidates (its ``iters`` are the short re-fit); ``refit_top`` how many candidates per round are re-fitted
     after screening (None: all), screened on ``screen_views`` held-out views per state (None: all of them);
     ``max_rounds`` greedy rounds (None: the movable bodies of the model entering selection + 2, since every
-    merge or prune removes one body; a fixed 6 stopped drawer-0000's seven bodies at three); an edit is taken only when it lowers the score by more than ``min_gain``
-    (None: half the penalty)
+    merge or prune removes one body; a fixed 6 stopped drawer-0000's seven bodies at three); an edit is
+    taken only when it lowers the score by more than ``min_gain`` (None: half the penalty)
     (ties go to the incumbent: a hinge swapped to a slide or a chain link moved onto the base lowers the
     complexity, so the penalty alone cannot stop it, and a short re-fit's noise alone must not change the
     tree); ``type_check``: after the structure rounds, every
