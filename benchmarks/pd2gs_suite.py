@@ -300,8 +300,6 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    try:
-        sys.exit(main())
-    except KeyboardInterrupt:  # Ctrl-C or SIGTERM (the runner stops its workers first)
-        print("interrupted; a rerun with the same --work resumes from the finished stages", file=sys.stderr)
-        sys.exit(130)
+    from rsart.console import guarded  # Ctrl-C or SIGTERM (the runner stops its workers first): exit 130, one line
+
+    sys.exit(guarded(main, "pd2gs_suite", "interrupted; a rerun with the same --work resumes from the finished stages"))
