@@ -202,15 +202,15 @@ def candidates(model: ArticulatedGaussians, ref: int = 0, trajectories: np.ndarr
     ident = list(range(n))
     sizes = np.bincount(model.labels().numpy(), minlength=n)
     for b in range(1, n):
-        if not _children(parent, b) and not keep_count:
+        removable = not keep_count and not _children(parent, b)  # a leaf may be pruned or merged away
+        if removable:
             owner = ident.copy()
             owner[b] = parent[b]
             out.append(({"edit": "prune", "body": b}, rebuild(model, owner, parent)))
         if sizes[b] < 3:  # (nearly) empty: no motion to re-estimate, only pruning or merging it makes sense
             continue
-        for a in range(1, n):
-            if (a != b and parent[a] == parent[b] and not _children(parent, b) and sizes[a] >= sizes[b]
-                    and not keep_count):
+        for a in range(1, n) if removable else ():
+            if a != b and parent[a] == parent[b] and sizes[a] >= sizes[b]:
                 if sizes[a] == sizes[b] and a > b:
                     continue
                 owner = ident.copy()
