@@ -217,11 +217,11 @@ def candidates(model: ArticulatedGaussians, ref: int = 0, trajectories: np.ndarr
                 owner[b] = a
                 out.append(({"edit": "merge", "body": b, "into": a}, rebuild(model, owner, parent)))
         out += swaps(model, b, ref, trajectories)
+        descendants = {b}  # b and its subtree: b may not hang on any of them
+        for c in range(1, n):  # parents precede children, one pass suffices
+            if parent[c] in descendants:
+                descendants.add(c)
         for p in range(1, n):
-            descendants = {b}
-            for c in range(1, n):  # parents precede children, one pass suffices
-                if parent[c] in descendants:
-                    descendants.add(c)
             if p == parent[b] or p in descendants:
                 continue
             par = parent.copy()
