@@ -101,7 +101,8 @@ class DiscoveryConfig:
     count_min_opacity: float = 0.3
     """ours: only Gaussians at least this opaque vote on the part count."""
     min_silhouette: float = 0.35
-    """ours: below it, one movable part (chosen on two trained demo fields, see docs)."""
+    """ours: below it, one movable part (chosen on two trained demo fields, see docs). Mode "articulated"
+    still starts from two clusters then and leaves one part or two to model selection."""
     given_count: int | None = None
     """for counter="given" (the pipeline fills it from meta.json)."""
     max_parts: int = 8

@@ -66,7 +66,8 @@ def count_parts(fld: StateField, dyn: np.ndarray, obj, states: list[str], cfg: D
 @dataclass
 class InitResult:
     """The initial model and how it was obtained: ``labels`` (N,) 0 = base, 1..K; ``joints`` the K Kabsch
-    estimates; ``ref_index`` the canonical state's index in ``state_ids``; ``count`` the counter's output;
+    estimates; ``ref_index`` the canonical state's index in ``state_ids``; ``count`` the counter's output
+    (``n``) and the number of clusters the initialisation asked for (``clusters``);
     ``keep`` (N,) bool, the stage-1 Gaussians kept in the model (opacity at least ``min_opacity``)."""
 
     model: ArticulatedGaussians
@@ -87,8 +88,11 @@ def init_from_field(field_or_model: Any, state_ids: list[str], ref: str, end: st
         field_or_model: a :class:`StateField` or a trained model with ``state_gaussians(state_id)``.
         state_ids: the training states, in the order the model's ``values`` rows will use.
         ref: the reference (canonical) state; ``end``: the state whose joint values are made positive.
-        n_parts: the number of movable parts if known, else counted by ``cfg.counter``
-            (:func:`count_parts`; "vlm" and a "given" count without ``cfg.given_count`` read ``obj``).
+        n_parts: the number of movable parts if known (that many clusters), else counted by ``cfg.counter``
+            (:func:`count_parts`; "vlm" and a "given" count without ``cfg.given_count`` read ``obj``). A
+            counted 1 (other than "given") starts as 2 clusters: model selection merges and prunes bodies
+            but never adds one, so one part or two is then its choice on the held-out views rather than the
+            counter's ``min_silhouette`` threshold (measured: docs/pd2gs-experiments.md, twenty-fourth entry).
         cfg: discovery settings for tau_mot, min_cluster_frac, kmeans_seed, joint_rule and the counter.
         obj: the ``rsart.load`` object (for the "vlm" and "given" counters only).
         confidence: initial ownership logit margin (see :func:`pd2gs.articulated.model.ownership_logits`).
@@ -100,16 +104,20 @@ def init_from_field(field_or_model: Any, state_ids: list[str], ref: str, end: st
     fld: StateField = as_state_field(field_or_model, state_ids)
     r = fld.index(ref)
     count: dict = {}
+    clusters = n_parts
     if n_parts is None:
         dyn = motion.dynamic_mask(fld.means, cfg.tau_mot)
         n_parts, count = count_parts(fld, dyn, obj, list(state_ids), cfg)
+        # selection merges and prunes bodies but never adds one: a counted 1 starts as 2 clusters, so
+        # whether the motion is one part or two is decided by the held-out views, not the counter's threshold
+        clusters = n_parts if cfg.counter == "given" or n_parts < 1 else max(int(n_parts), 2)
     keep = np.asarray(fld.opacities).reshape(-1) >= min_opacity
     if keep.sum() < 10:
         keep = np.ones(fld.n, dtype=bool)
     fld = fld.select(keep)
     labels = np.zeros(fld.n, dtype=np.int64)
-    if int(n_parts) > 0:
-        labels = motion.coarse_labels(fld.means, int(n_parts), cfg.tau_mot, cfg.min_cluster_frac, cfg.kmeans_seed,
+    if int(clusters) > 0:
+        labels = motion.coarse_labels(fld.means, int(clusters), cfg.tau_mot, cfg.min_cluster_frac, cfg.kmeans_seed,
                                       cfg.kmeans_n_init, method="rigid")
     kept = [p for p in range(1, int(labels.max()) + 1) if (labels == p).sum() >= min_part]
     relabel = np.zeros(int(labels.max()) + 1, dtype=np.int64)
@@ -125,4 +133,5 @@ def init_from_field(field_or_model: Any, state_ids: list[str], ref: str, end: st
                                  np.array([j.axis for j in joints]).reshape(K, 3),
                                  np.array([j.origin for j in joints]).reshape(K, 3), values,
                                  torch.from_numpy(labels), confidence=confidence)
-    return InitResult(model, labels, joints, list(fld.state_ids), r, {"n": int(n_parts), **count}, keep)
+    return InitResult(model, labels, joints, list(fld.state_ids), r, {"n": int(n_parts), "clusters": int(clusters),
+                                                                      **count}, keep)

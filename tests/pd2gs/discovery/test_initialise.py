@@ -47,10 +47,28 @@ def test_the_lid_scene_initialises_revolute_parts_near_the_truth():
 def test_a_given_count_of_one_gives_one_body_owning_the_moving_lid():
     scene = make_scene("lid", n=1500)
     res = init_from_field(field_of(scene), STATES, "m0", "m3", n_parts=1)
-    assert res.model.num_bodies == 2 and res.count == {"n": 1}
+    assert res.model.num_bodies == 2 and res.count == {"n": 1, "clusters": 1}
     lid = scene.labels.numpy() == 1
     # near the hinge the lid moves less than tau_mot of the largest motion: those stay with the base
     assert (res.labels[lid] == 1).mean() > 0.6 and (res.labels[~lid] == 0).mean() > 0.95
+
+
+def test_a_counted_single_part_starts_as_two_clusters_for_selection_to_merge_or_prune():
+    """Selection never adds a body, so a count of 1 from the trajectory counter (here forced by a
+    silhouette threshold no clustering reaches) starts as two clusters, both pieces of the lid."""
+    from pd2gs.discovery.config import DiscoveryConfig
+
+    scene = make_scene("lid", n=1500)
+    res = init_from_field(field_of(scene), STATES, "m0", "m3", cfg=DiscoveryConfig(min_silhouette=1.0))
+    assert res.count["counter"] == "trajectory" and res.count["n"] == 1 and res.count["clusters"] == 2
+    m = res.model
+    assert m.num_bodies == 3 and m.parent == [-1, 0, 0]
+    lid = scene.labels.numpy() == 1
+    for b in (1, 2):
+        assert (res.labels == b).sum() >= 10 and lid[res.labels == b].mean() > 0.95
+        assert angle_between_deg(m.unit_axes[b - 1].detach(), scene.axes[0]) < 2.0
+    # a given count is taken as it is
+    assert init_from_field(field_of(scene), STATES, "m0", "m3", n_parts=1).model.num_bodies == 2
 
 
 def test_a_given_count_over_segments_the_chain_into_flat_children_of_the_base():
