@@ -210,7 +210,7 @@ def candidates(model: ArticulatedGaussians, ref: int = 0, trajectories: np.ndarr
         if sizes[b] < 3:  # (nearly) empty: no motion to re-estimate, only pruning or merging it makes sense
             continue
         for a in range(1, n) if removable else ():
-            if a != b and parent[a] == parent[b] and sizes[a] >= sizes[b]:
+            if a != b and a != parent[b] and sizes[a] >= sizes[b]:  # into any body but its parent (a prune)
                 if sizes[a] == sizes[b] and a > b:
                     continue
                 owner = ident.copy()

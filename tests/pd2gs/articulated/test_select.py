@@ -126,6 +126,49 @@ def test_selection_hangs_the_flap_on_the_lid(cfg):
     assert sel.model.parent == [-1, 0, 1], sel.log
 
 
+def chained_flap_with_a_flat_piece(scene):
+    """The flap-on-lid truth (flap hung on the lid) plus a third body: a third of the flap's Gaussians as a
+    child of the base, moved by the flap's world motion (what a flat init leaves once the rest of the flap
+    has been re-parented onto the lid: desk_lamp-0001, docs/pd2gs-experiments.md, twenty-fifth entry)."""
+    lab = scene.labels.clone()
+    flap = torch.nonzero(lab == 2).squeeze(1)
+    lab[flap[torch.argsort(scene.means[flap, 0])][: len(flap) // 3]] = 3
+    t, a, p, v = relative_joint(truth_model(scene), 2, 0)
+    return ArticulatedGaussians(gaussians_of(scene), [-1, 0, 1, 0], list(scene.joint_types) + [t],
+                                np.vstack([scene.axes, a]), np.vstack([scene.pivots, p]),
+                                np.hstack([scene.values, np.asarray(v)[:, None]]), lab)
+
+
+def test_a_leaf_may_merge_into_a_body_that_is_not_its_sibling():
+    """The flat piece of the flap can join the chained flap: merges are offered into any body but the leaf's
+    parent (that one is a prune), and the merged model poses the piece as the truth does."""
+    scene = make_scene("flap", n=900)
+    model = chained_flap_with_a_flat_piece(scene)
+    merges = [(e["body"], e["into"]) for e, _ in candidates(model, trajectories=trajectories(scene))
+              if e["edit"] == "merge"]
+    assert (3, 2) in merges and (3, 1) in merges  # until 2026-11-29 only siblings: (3, 2) was not offered
+    assert all(into != model.parent[b] for b, into in merges)
+    merged = dict((tuple((e["body"], e["into"])), m) for e, m in candidates(model, trajectories=trajectories(scene))
+                  if e["edit"] == "merge")[(3, 2)]
+    assert merged.parent == [-1, 0, 1]
+    merged.harden()
+    for s in range(4):
+        assert torch.allclose(merged.pose(s)[0], scene.posed_means(s), atol=1e-4)
+
+
+@pytest.mark.slow
+def test_selection_merges_the_flat_piece_into_the_chained_flap(cfg):
+    torch.set_num_threads(1)
+    scene = make_scene("flap", n=1200)
+    frames, masks = render_scene(scene, views=8, size=(48, 36))
+    sel = select_model(chained_flap_with_a_flat_piece(scene), frames, masks, cfg, trajectories(scene))
+    chosen = [(e["edit"], e.get("body"), e.get("into")) for e in sel.log if e.get("chosen")]
+    assert sel.model.parent == [-1, 0, 1], chosen
+    # the whole flap on the chained body (a merge into the lid or a prune would also leave two bodies)
+    lab = sel.model.labels()
+    assert (lab[scene.labels == 2] == 2).float().mean() > 0.95, chosen
+
+
 @pytest.mark.slow
 def test_the_searched_re_parent_finds_the_flaps_joint_where_stage_1_moved_the_flap_halfway():
     """Stage 1 moved the flap's Gaussians only halfway (a field that moves part of a part, as on stand-0002's
