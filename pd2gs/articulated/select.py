@@ -23,7 +23,9 @@ stage 1's trajectories, already renders well), then re-fits only the ``refit_top
 the same way (each candidate counts as the better of its score as built and after the re-fit); the greedy
 loop applies the best edit while it improves the score:
 
-* ``merge(a, b)``: b's Gaussians join a (both children of the same parent); a's joint is kept.
+* ``merge(a, b)``: leaf b's Gaussians join a, any body but b's parent (that is the prune); a's joint is kept.
+  Not only siblings: once selection has hung a part on another, a flat piece of it must be able to join it
+  (desk_lamp-0001 kept such a piece as a spurious slide; docs/pd2gs-experiments.md, twenty-fifth entry).
 * ``prune(b)``: b's Gaussians join its parent; b's joint is dropped (b must have no children).
 * ``reparent(b, p)``: b hangs on p instead; its joint is re-estimated relative to p with
   :func:`pd2gs.kinematics.estimate_joint` on b's centres seen in p's frame in every state.
@@ -194,9 +196,9 @@ def relative_joint(model: ArticulatedGaussians, b: int, p: int, ref: int = 0,
 def candidates(model: ArticulatedGaussians, ref: int = 0, trajectories: np.ndarray | None = None,
                search: tuple[ConsistencyViews, SearchConfig] | None = None, keep_count: bool = False
                ) -> list[tuple[dict, ArticulatedGaussians]]:
-    """Every one-step edit of ``model``: merges of siblings, prunes of leaves (neither when ``keep_count``),
-    joint-type swaps, re-parents to non-descendants (each twice when ``search`` = (views, config) is given:
-    its joint read off the trajectories, and found by :func:`searched_reparent`)."""
+    """Every one-step edit of ``model``: merges of a leaf into any body but its parent, prunes of leaves
+    (neither when ``keep_count``), joint-type swaps, re-parents to non-descendants (each twice when ``search``
+    = (views, config) is given: its joint read off the trajectories, and found by :func:`searched_reparent`)."""
     n, parent = model.num_bodies, list(model.parent)
     out = []
     ident = list(range(n))
