@@ -144,12 +144,11 @@ def test_a_leaf_may_merge_into_a_body_that_is_not_its_sibling():
     parent (that one is a prune), and the merged model poses the piece as the truth does."""
     scene = make_scene("flap", n=900)
     model = chained_flap_with_a_flat_piece(scene)
-    merges = [(e["body"], e["into"]) for e, _ in candidates(model, trajectories=trajectories(scene))
-              if e["edit"] == "merge"]
+    merges = {(e["body"], e["into"]): m for e, m in candidates(model, trajectories=trajectories(scene))
+              if e["edit"] == "merge"}
     assert (3, 2) in merges and (3, 1) in merges  # until 2026-11-29 only siblings: (3, 2) was not offered
     assert all(into != model.parent[b] for b, into in merges)
-    merged = dict((tuple((e["body"], e["into"])), m) for e, m in candidates(model, trajectories=trajectories(scene))
-                  if e["edit"] == "merge")[(3, 2)]
+    merged = merges[(3, 2)]
     assert merged.parent == [-1, 0, 1]
     merged.harden()
     for s in range(4):
