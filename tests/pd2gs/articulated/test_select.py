@@ -117,11 +117,17 @@ def test_selection_merges_a_lid_cut_into_eight_pieces_past_the_old_fixed_cap(cfg
     assert sel.model.num_bodies == 2, [(e["edit"], e.get("score")) for e in sel.log if e.get("chosen")]
 
 
-@pytest.mark.slow
-def test_selection_hangs_the_flap_on_the_lid(cfg):
+@pytest.fixture(scope="module")
+def flap_views():
+    """The flap-on-lid scene (1200 Gaussians) and its renders, shared by the selection tests on it."""
     torch.set_num_threads(1)
     scene = make_scene("flap", n=1200)
-    frames, masks = render_scene(scene, views=8, size=(48, 36))
+    return (scene, *render_scene(scene, views=8, size=(48, 36)))
+
+
+@pytest.mark.slow
+def test_selection_hangs_the_flap_on_the_lid(cfg, flap_views):
+    scene, frames, masks = flap_views
     sel = select_model(flat_flap_model(scene), frames, masks, cfg, trajectories(scene))
     assert sel.model.parent == [-1, 0, 1], sel.log
 
@@ -156,10 +162,8 @@ def test_a_leaf_may_merge_into_a_body_that_is_not_its_sibling():
 
 
 @pytest.mark.slow
-def test_selection_merges_the_flat_piece_into_the_chained_flap(cfg):
-    torch.set_num_threads(1)
-    scene = make_scene("flap", n=1200)
-    frames, masks = render_scene(scene, views=8, size=(48, 36))
+def test_selection_merges_the_flat_piece_into_the_chained_flap(cfg, flap_views):
+    scene, frames, masks = flap_views
     sel = select_model(chained_flap_with_a_flat_piece(scene), frames, masks, cfg, trajectories(scene))
     chosen = [(e["edit"], e.get("body"), e.get("into")) for e in sel.log if e.get("chosen")]
     assert sel.model.parent == [-1, 0, 1], chosen
