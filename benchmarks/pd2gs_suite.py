@@ -55,6 +55,9 @@ ABLATIONS = {  # name -> DiscoveryConfig overrides (same trained field)
     "kabsch": {"starts": "kabsch"},  # from stage 1's Kabsch joints only (the default until 2026-11-26)
     "kabsch-seed-1": {"starts": "kabsch", "seed": 1},
     "canonical-start": {"canonical": "start"},  # the start state's Gaussians as the canonical geometry (until 2026-11-27)
+    # both canonical states discovered, the lower held-out loss kept (twice the discovery where they differ)
+    "canonical-both": {"canonical": "widest,start"},
+    "canonical-both-seed-1": {"canonical": "widest,start", "seed": 1},
     # selection's finalists (2 per round) re-fitted 600 steps, searched re-parents while <= 2 movable bodies
     "long-select": {"select_iters": 600, "select_top": 2, "select_search_bodies": 2},
 }

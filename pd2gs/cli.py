@@ -76,6 +76,7 @@ def _parser() -> argparse.ArgumentParser:
     add_option(u, DiscoveryConfig, "fit_silhouette", flag="--silhouette")
     add_option(u, DiscoveryConfig, "fit_depth", flag="--depth")
     add_option(u, DiscoveryConfig, "starts")
+    add_option(u, DiscoveryConfig, "canonical")
     add_option(u, DiscoveryConfig, "restarts")
     for name in ("select", "refine"):
         add_option(u, DiscoveryConfig, name, negate=True)

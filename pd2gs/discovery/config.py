@@ -20,7 +20,8 @@ Ablation switches (docs/pd2gs-parts.md has the table):
   count from meta.json).
 * ``fit_silhouette``  — articulated: weight of the object-silhouette loss (0 = RGB only).
 * ``fit_depth``       — articulated: weight of a depth loss (0, the default: PD²GS is RGB-only).
-* ``canonical``       — articulated: the canonical state, "widest" (default) or "start".
+* ``canonical``       — articulated: the canonical state, "widest" (default), "start", or both
+                        ("widest,start": each discovered, the lowest held-out loss kept).
 * ``select``          — articulated: False keeps the initial part count, tree and types.
 * ``starts``          — articulated: the first joints (stage 1's Kabsch joints, the coarse joint search's,
                         the search on stage 1's rendered surfaces); each is discovered and the lowest
@@ -60,6 +61,8 @@ class VLMConfig:
 
 STARTS = ("kabsch", "search", "surface")
 """the first joints mode "articulated" can start from (``DiscoveryConfig.starts``)."""
+CANONICALS = ("widest", "start")
+"""the rules that choose mode "articulated"'s canonical state (``DiscoveryConfig.canonical``)."""
 
 
 @dataclass
@@ -87,11 +90,15 @@ class DiscoveryConfig:
     """ours: split clusters into spatially connected pieces (parts that always move together, e.g. equal
     drawers in multi-part states)."""
 
-    canonical: Literal["widest", "start"] = "widest"
+    canonical: str = "widest"
     """articulated: the state whose stage-1 Gaussians become the canonical geometry (joint values 0 there).
     "widest" (ours): the used state whose object silhouettes cover the most pixels on average, the most open
     one, where parts hidden in a closed state (a drawer's box, a tray) are seen; the start where no view has
-    a mask. "start": the start state (the default until 2026-11-27)."""
+    a mask. "start": the start state (the default until 2026-11-27). A comma list (``"widest,start"``) tries
+    each rule that names a different state, every start of ``starts`` from each, and keeps the model with the
+    lowest held-out loss, as among starts: where stage 1 moves a part in one state's Gaussians and not in
+    another's (eyeglasses_rs-0000: none of the right temple's 623 Gaussians moves at the widest state), the
+    held-out views choose (docs/pd2gs-experiments.md, twenty-seventh entry)."""
 
     # --- how many parts
     counter: Literal["trajectory", "motion", "vlm", "given"] = "trajectory"
@@ -249,6 +256,10 @@ class DiscoveryConfig:
         if bad or not self.start_list or len(set(self.start_list)) < len(self.start_list):
             raise ConfigError(f"starts: {self.starts!r} must be a comma list of distinct "
                               + ", ".join(repr(x) for x in STARTS))
+        bad = [x for x in self.canonical_list if x not in CANONICALS]
+        if bad or not self.canonical_list or len(set(self.canonical_list)) < len(self.canonical_list):
+            raise ConfigError(f"canonical: {self.canonical!r} must be a comma list of distinct "
+                              + ", ".join(repr(x) for x in CANONICALS))
         if self.restarts < 1:
             raise ConfigError("restarts must be >= 1")
         if self.n_states is not None and self.n_states < 2:
@@ -260,6 +271,11 @@ class DiscoveryConfig:
     def start_list(self) -> list[str]:
         """``starts`` as a list."""
         return [x.strip() for x in self.starts.split(",") if x.strip()]
+
+    @property
+    def canonical_list(self) -> list[str]:
+        """``canonical`` as a list of rules."""
+        return [x.strip() for x in self.canonical.split(",") if x.strip()]
 
     def to_dict(self) -> dict:
         return asdict(self)

@@ -240,10 +240,12 @@ def fit_config(d: Discovery, iters: int) -> FitConfig:
                      backend=c.render_backend, seed=c.seed)
 
 
-def canonical_state(d: Discovery) -> str:
-    """``cfg.canonical``: "start", or "widest": the used state whose views' object masks cover the largest
-    mean fraction of the image (the start when no view of a used state has a mask)."""
-    if d.cfg.canonical == "start" or d.obj is None:
+def canonical_state(d: Discovery, rule: str | None = None) -> str:
+    """The state a canonical ``rule`` (default: the first of ``cfg.canonical``) names: "start", or "widest":
+    the used state whose views' object masks cover the largest mean fraction of the image (the start when no
+    view of a used state has a mask)."""
+    rule = rule or d.cfg.canonical_list[0]
+    if rule == "start" or d.obj is None:
         return d.start
     area = {}
     for s in d.states:
@@ -256,10 +258,21 @@ def canonical_state(d: Discovery) -> str:
     return best
 
 
-def initialise(d: Discovery) -> None:
+def canonical_states(d: Discovery) -> list[str]:
+    """The distinct states the rules of ``cfg.canonical`` name, in its order."""
+    out: list[str] = []
+    for rule in d.cfg.canonical_list:
+        s = canonical_state(d, rule)
+        if s not in out:
+            out.append(s)
+    return out
+
+
+def initialise(d: Discovery, ref: str | None = None) -> None:
     """Part count, rigid-motion clusters and Kabsch joints of stage 1 -> the first (flat) articulated model,
-    canonical at :func:`canonical_state`."""
-    ref = canonical_state(d)
+    canonical at ``ref`` (default: :func:`canonical_state`)."""
+    ref = ref or canonical_state(d)
+    d.diag.setdefault("canonical", {})["state"] = ref
     other = d.end if ref != d.end else d.start  # the state whose initial values are made positive
     init = init_from_field(d.fld, d.states, ref, other, cfg=d.cfg, obj=d.obj, min_opacity=d.cfg.fit_min_opacity)
     d.diag["count"] = init.count
@@ -376,36 +389,50 @@ def model_joints(model: ArticulatedGaussians, states: list[str], start: str, end
 
 
 def articulated_parts(d: Discovery) -> None:
-    """Mode "articulated": per start of ``cfg.starts`` and seed (``cfg.restarts``) initialise -> (coarse joint
-    search) -> fit -> select -> the posed model's field, labels and joints; the run with the lowest held-out
-    loss (``diag["test_loss"]``, the one model selection scores: L1 plus the silhouette term) is kept, every run's in
-    ``diag["starts"]`` when there was more than one. A search that keeps nothing leaves the initial model
-    as it was, so that start shares the Kabsch start's fit instead of repeating it."""
+    """Mode "articulated": per canonical state of ``cfg.canonical`` (:func:`canonical_states`), seed
+    (``cfg.restarts``) and start of ``cfg.starts``: initialise -> (coarse joint search) -> fit -> select ->
+    the posed model's field, labels and joints; the run with the lowest held-out loss (``diag["test_loss"]``,
+    the one model selection scores: L1 plus the silhouette term) is kept, every run's in ``diag["starts"]``
+    when there was more than one. A search that keeps nothing leaves the initial model as it was, so that
+    start shares the Kabsch start's fit instead of repeating it. A canonical state where no movable part is
+    found is skipped while another one is left."""
     d.frames, d.masks = training_views(d.obj, d.states, d.cfg)
     runs: list[tuple[str, Discovery, dict]] = []  # (start, run, note: "fit_of" = index of the run it shares)
-    for k in range(d.cfg.restarts):
-        base = dataclasses.replace(d, cfg=dataclasses.replace(d.cfg, seed=d.cfg.seed + k), diag=dict(d.diag))
-        initialise(base)
-        plain: int | None = None  # index in runs of this seed's fit from the initial model as it is
-        for i, start in enumerate(d.cfg.start_list):
-            last = i == len(d.cfg.start_list) - 1  # (the last start takes the model itself: no copy to fit)
-            run = base if last else dataclasses.replace(base, model=copy.deepcopy(base.model),
-                                                        diag=copy.deepcopy(base.diag))
-            note = {}
-            if start == "search":
-                search(run)
-                note["search_kept"] = run.diag["search"]["kept"]
-            elif start == "surface":
-                surface_search(run)
-            changed = start == "surface" or note.get("search_kept", False)
-            if not changed and plain is not None:
-                # a search that kept nothing restored the initial model bitwise: its fit would repeat this one
-                runs.append((start, runs[plain][1], {**note, "fit_of": plain}))
-                continue
-            articulated_fit(run)
-            if not changed:
-                plain = len(runs)
-            runs.append((start, run, note))
+    refs = canonical_states(d)
+    failed: list[str] = []
+    for ref in refs:
+        for k in range(d.cfg.restarts):
+            base = dataclasses.replace(d, cfg=dataclasses.replace(d.cfg, seed=d.cfg.seed + k),
+                                       diag=copy.deepcopy(d.diag))
+            try:
+                initialise(base, ref)
+            except ObjectFailure as e:
+                if len(refs) == 1:
+                    raise
+                failed.append(f"canonical {ref}: {e}")
+                break
+            plain: int | None = None  # index in runs of this seed's fit from the initial model as it is
+            for i, start in enumerate(d.cfg.start_list):
+                last = i == len(d.cfg.start_list) - 1  # (the last start takes the model itself: no copy to fit)
+                run = base if last else dataclasses.replace(base, model=copy.deepcopy(base.model),
+                                                            diag=copy.deepcopy(base.diag))
+                note = {"canonical": ref} if len(refs) > 1 else {}
+                if start == "search":
+                    search(run)
+                    note["search_kept"] = run.diag["search"]["kept"]
+                elif start == "surface":
+                    surface_search(run)
+                changed = start == "surface" or note.get("search_kept", False)
+                if not changed and plain is not None:
+                    # a search that kept nothing restored the initial model bitwise: its fit would repeat this one
+                    runs.append((start, runs[plain][1], {**note, "fit_of": plain}))
+                    continue
+                articulated_fit(run)
+                if not changed:
+                    plain = len(runs)
+                runs.append((start, run, note))
+    if not runs:
+        raise ObjectFailure("; ".join(failed))
     chosen = min(range(len(runs)), key=lambda i: runs[i][1].diag["test_loss"])
     best = runs[chosen][1]
     for f in dataclasses.fields(Discovery):
@@ -414,7 +441,8 @@ def articulated_parts(d: Discovery) -> None:
     if len(runs) > 1:
         d.diag["starts"] = {"runs": [{"start": s, "seed": r.cfg.seed, "test_l1": r.diag["test_l1"],
                                       "test_loss": r.diag["test_loss"], **note}
-                                     for s, r, note in runs], "chosen": chosen}
+                                     for s, r, note in runs], "chosen": chosen,
+                             **({"failed": failed} if failed else {})}
     if d.cfg.polish_iters > 0:
         polish(d)
         read_model(d)

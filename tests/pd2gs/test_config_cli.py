@@ -48,6 +48,9 @@ def test_cli_choices_and_defaults_are_the_fields():
 
 def test_invalid_values_exit_2_without_a_traceback(tmp_path):
     for argv in (["train", str(tmp_path), "--out", str(tmp_path / "r"), "--iters", "0"],
-                 ["run", "--data", str(tmp_path), "--out", str(tmp_path / "o"), "--n-states", "1"]):
+                 ["run", "--data", str(tmp_path), "--out", str(tmp_path / "o"), "--n-states", "1"],
+                 ["run", "--data", str(tmp_path), "--out", str(tmp_path / "o"), "--canonical", "widest,end"]):
         r = subprocess.run([sys.executable, "-m", "pd2gs.cli", *argv], capture_output=True, text=True)
         assert r.returncode == 2 and "Traceback" not in r.stderr and "pd2gs: error:" in r.stderr, r.stderr
+        if "--canonical" in argv:
+            assert "canonical" in r.stderr, r.stderr

@@ -314,3 +314,46 @@ def test_bad_starts_are_refused_by_name(starts):
 
     with pytest.raises(ConfigError, match="starts"):
         DiscoveryConfig(starts=starts)
+
+
+def test_each_canonical_state_is_discovered_and_the_lowest_held_out_loss_kept(data):
+    """``canonical="widest,start"``: the cabinet's widest state (m3) and its start (m0) each give a discovery;
+    the kept one has the lower held-out loss, is canonical at its own state, and is the model that canonical
+    alone gives."""
+    from pd2gs.discovery import pipeline as P
+
+    torch.set_num_threads(1)
+    obj = rsart.load(data / "cabinet-0000")
+    fld, _ = perfect_field(obj.twin, obj.meta, STATES, n=600, jitter=0.002)
+    fld = coloured(fld, obj)
+    bg = tuple(float(c) for c in obj.states["m0"].views[0].rgb[0, 0] / 255.0)
+    quick = dict(fit_max_side=48, background=bg, fit_iters=60, select=False, polish_iters=0, starts="kabsch")
+
+    def run(**kw):
+        d = P.stage1(fld, obj, DiscoveryConfig(**quick, **kw))
+        P.articulated_parts(d)
+        return d
+
+    both = run(canonical="widest,start")
+    runs = both.diag["starts"]["runs"]
+    assert [(r["start"], r["canonical"]) for r in runs] == [("kabsch", "m3"), ("kabsch", "m0")]
+    loss = [r["test_loss"] for r in runs]
+    assert loss[0] != loss[1] and both.diag["starts"]["chosen"] == int(np.argmin(loss))
+    kept = runs[int(np.argmin(loss))]["canonical"]
+    assert both.diag["canonical"]["state"] == kept and both.states[both.ref_index] == kept
+    alone = run(canonical="widest" if kept == "m3" else "start")
+    assert "starts" not in alone.diag and alone.diag["test_loss"] == both.diag["test_loss"]
+    assert torch.equal(alone.model.values, both.model.values) and np.array_equal(alone.labels, both.labels)
+    # rules naming the same state are discovered once
+    d = P.stage1(fld, obj, DiscoveryConfig(**quick, canonical="start,widest"))
+    assert P.canonical_states(d) == ["m0", "m3"]
+    one = P.stage1(fld, obj, DiscoveryConfig(**quick, canonical="start"))
+    assert P.canonical_states(one) == ["m0"]
+
+
+@pytest.mark.parametrize("canonical", ["", "start,start", "end", "widest;start"])
+def test_bad_canonical_rules_are_refused_by_name(canonical):
+    from pd2gs.config_cli import ConfigError
+
+    with pytest.raises(ConfigError, match="canonical"):
+        DiscoveryConfig(canonical=canonical)
