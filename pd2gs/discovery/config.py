@@ -98,7 +98,7 @@ class DiscoveryConfig:
     each rule that names a different state, every start of ``starts`` from each, and keeps the model with the
     lowest held-out loss, as among starts: where stage 1 moves a part in one state's Gaussians and not in
     another's (eyeglasses_rs-0000: none of the right temple's 623 Gaussians moves at the widest state), the
-    held-out views choose (docs/pd2gs-experiments.md, twenty-seventh entry)."""
+    held-out views choose (docs/pd2gs-experiments.md, twenty-eighth entry)."""
 
     # --- how many parts
     counter: Literal["trajectory", "motion", "vlm", "given"] = "trajectory"
