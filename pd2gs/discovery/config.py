@@ -65,6 +65,11 @@ CANONICALS = ("widest", "start")
 """the rules that choose mode "articulated"'s canonical state (``DiscoveryConfig.canonical``)."""
 
 
+def comma_list(value: str) -> list[str]:
+    """"a, b,,c" -> ["a", "b", "c"] (a config field that names several choices)."""
+    return [x.strip() for x in value.split(",") if x.strip()]
+
+
 @dataclass
 class DiscoveryConfig:
     """Every knob of ``pd2gs.discovery.pipeline.discover``."""
@@ -252,14 +257,11 @@ class DiscoveryConfig:
 
     def __post_init__(self) -> None:
         check_choices(self)
-        bad = [x for x in self.start_list if x not in STARTS]
-        if bad or not self.start_list or len(set(self.start_list)) < len(self.start_list):
-            raise ConfigError(f"starts: {self.starts!r} must be a comma list of distinct "
-                              + ", ".join(repr(x) for x in STARTS))
-        bad = [x for x in self.canonical_list if x not in CANONICALS]
-        if bad or not self.canonical_list or len(set(self.canonical_list)) < len(self.canonical_list):
-            raise ConfigError(f"canonical: {self.canonical!r} must be a comma list of distinct "
-                              + ", ".join(repr(x) for x in CANONICALS))
+        for name, allowed in (("starts", STARTS), ("canonical", CANONICALS)):
+            items = comma_list(getattr(self, name))
+            if not items or len(set(items)) < len(items) or any(x not in allowed for x in items):
+                raise ConfigError(f"{name}: {getattr(self, name)!r} must be a comma list of distinct "
+                                  + ", ".join(repr(x) for x in allowed))
         if self.restarts < 1:
             raise ConfigError("restarts must be >= 1")
         if self.n_states is not None and self.n_states < 2:
@@ -270,12 +272,12 @@ class DiscoveryConfig:
     @property
     def start_list(self) -> list[str]:
         """``starts`` as a list."""
-        return [x.strip() for x in self.starts.split(",") if x.strip()]
+        return comma_list(self.starts)
 
     @property
     def canonical_list(self) -> list[str]:
         """``canonical`` as a list of rules."""
-        return [x.strip() for x in self.canonical.split(",") if x.strip()]
+        return comma_list(self.canonical)
 
     def to_dict(self) -> dict:
         return asdict(self)

@@ -393,46 +393,26 @@ def articulated_parts(d: Discovery) -> None:
     (``cfg.restarts``) and start of ``cfg.starts``: initialise -> (coarse joint search) -> fit -> select ->
     the posed model's field, labels and joints; the run with the lowest held-out loss (``diag["test_loss"]``,
     the one model selection scores: L1 plus the silhouette term) is kept, every run's in ``diag["starts"]``
-    when there was more than one. A search that keeps nothing leaves the initial model as it was, so that
-    start shares the Kabsch start's fit instead of repeating it. A canonical state where no movable part is
-    found is skipped while another one is left."""
+    when there was more than one (:func:`discover_starts`). A canonical state where no movable part is found
+    is skipped while another one is left."""
     d.frames, d.masks = training_views(d.obj, d.states, d.cfg)
     runs: list[tuple[str, Discovery, dict]] = []  # (start, run, note: "fit_of" = index of the run it shares)
     refs = canonical_states(d)
-    failed: list[str] = []
+    failed: list[tuple[str, ObjectFailure]] = []
     for ref in refs:
         for k in range(d.cfg.restarts):
             base = dataclasses.replace(d, cfg=dataclasses.replace(d.cfg, seed=d.cfg.seed + k),
                                        diag=copy.deepcopy(d.diag))
             try:
                 initialise(base, ref)
-            except ObjectFailure as e:
-                if len(refs) == 1:
-                    raise
-                failed.append(f"canonical {ref}: {e}")
+            except ObjectFailure as e:  # no movable part from this state: it is skipped, its other seeds too
+                failed.append((ref, e))
                 break
-            plain: int | None = None  # index in runs of this seed's fit from the initial model as it is
-            for i, start in enumerate(d.cfg.start_list):
-                last = i == len(d.cfg.start_list) - 1  # (the last start takes the model itself: no copy to fit)
-                run = base if last else dataclasses.replace(base, model=copy.deepcopy(base.model),
-                                                            diag=copy.deepcopy(base.diag))
-                note = {"canonical": ref} if len(refs) > 1 else {}
-                if start == "search":
-                    search(run)
-                    note["search_kept"] = run.diag["search"]["kept"]
-                elif start == "surface":
-                    surface_search(run)
-                changed = start == "surface" or note.get("search_kept", False)
-                if not changed and plain is not None:
-                    # a search that kept nothing restored the initial model bitwise: its fit would repeat this one
-                    runs.append((start, runs[plain][1], {**note, "fit_of": plain}))
-                    continue
-                articulated_fit(run)
-                if not changed:
-                    plain = len(runs)
-                runs.append((start, run, note))
+            discover_starts(base, runs, {"canonical": ref} if len(refs) > 1 else {})
     if not runs:
-        raise ObjectFailure("; ".join(failed))
+        if len(failed) == 1:
+            raise failed[0][1]
+        raise ObjectFailure("; ".join(f"canonical {ref}: {e}" for ref, e in failed))
     chosen = min(range(len(runs)), key=lambda i: runs[i][1].diag["test_loss"])
     best = runs[chosen][1]
     for f in dataclasses.fields(Discovery):
@@ -442,10 +422,38 @@ def articulated_parts(d: Discovery) -> None:
         d.diag["starts"] = {"runs": [{"start": s, "seed": r.cfg.seed, "test_l1": r.diag["test_l1"],
                                       "test_loss": r.diag["test_loss"], **note}
                                      for s, r, note in runs], "chosen": chosen,
-                             **({"failed": failed} if failed else {})}
+                             **({"failed": [f"canonical {ref}: {e}" for ref, e in failed]} if failed else {})}
     if d.cfg.polish_iters > 0:
         polish(d)
         read_model(d)
+
+
+def discover_starts(base: Discovery, runs: list[tuple[str, Discovery, dict]], note: dict) -> None:
+    """Every start of ``cfg.starts`` from the initialised ``base``: (coarse joint search) -> fit -> select,
+    each appended to ``runs`` as (start, run, ``note`` + the start's own notes). A search that keeps nothing
+    leaves the initial model as it was, so that start shares the Kabsch start's fit ("fit_of": its index in
+    ``runs``) instead of repeating it."""
+    plain: int | None = None  # index in runs of the fit from the initial model as it is
+    starts = base.cfg.start_list
+    for i, start in enumerate(starts):
+        last = i == len(starts) - 1  # (the last start takes the model itself: no copy to fit)
+        run = base if last else dataclasses.replace(base, model=copy.deepcopy(base.model),
+                                                    diag=copy.deepcopy(base.diag))
+        own = dict(note)
+        if start == "search":
+            search(run)
+            own["search_kept"] = run.diag["search"]["kept"]
+        elif start == "surface":
+            surface_search(run)
+        changed = start == "surface" or own.get("search_kept", False)
+        if not changed and plain is not None:
+            # a search that kept nothing restored the initial model bitwise: its fit would repeat this one
+            runs.append((start, runs[plain][1], {**own, "fit_of": plain}))
+            continue
+        articulated_fit(run)
+        if not changed:
+            plain = len(runs)
+        runs.append((start, run, own))
 
 
 def polish(d: Discovery) -> None:
