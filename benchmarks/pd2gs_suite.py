@@ -42,6 +42,7 @@ ABLATIONS = {  # name -> DiscoveryConfig overrides (same trained field)
     "no-silhouette": {"fit_silhouette": 0.0},  # RGB only
     "2-states": {"n_states": 2},  # start and end states only
     "given-count": {"counter": "given"},  # the true part count (meta.json)
+    "given-count-seed-1": {"counter": "given", "seed": 1},
     "surface": {"starts": "kabsch,search,surface"},  # + the search on stage 1's rendered surfaces (opt-in)
     "given-surface": {"counter": "given", "starts": "kabsch,search,surface"},
     "no-select": {"select": False},  # the initial count, tree and types
