@@ -27,8 +27,6 @@ loop applies the best edit while it improves the score:
   Not only siblings: once selection has hung a part on another, a flat piece of it must be able to join it
   (desk_lamp-0001 kept such a piece as a spurious slide; docs/pd2gs-experiments.md, twenty-fifth entry).
 * ``prune(b)``: b's Gaussians join its parent; b's joint is dropped (b must have no children).
-* ``dissolve(b)``: leaf b's Gaussians go piece by piece, each to the other body under whose pose it matches
-  the training images best (:func:`.ownership.colour_costs`); b's joint is dropped.
 * ``reparent(b, p)``: b hangs on p instead; its joint is re-estimated relative to p with
   :func:`pd2gs.kinematics.estimate_joint` on b's centres seen in p's frame in every state.
 * ``swap(b)``: b's joint type changes (revolute <-> prismatic), parameters from discovery's Kabsch fit
@@ -54,7 +52,7 @@ from pd2gs.kinematics import estimate_joint, prismatic_params, revolute_params, 
 
 from .fit import FitConfig, evaluate_views, fit_articulated
 from .model import ArticulatedGaussians
-from .ownership import colour_costs, view_subset
+from .ownership import view_subset
 from .search import ConsistencyViews, SearchConfig, _ramp, _set_joint, search_body
 
 
@@ -76,10 +74,8 @@ class SelectConfig:
     movable bodies (a compute budget: each is one coarse search, tens of seconds on 2 cores, and a tree of K
     bodies has K(K-1) re-parents). Off (0) by default until measured on the whole split: with 3 the test
     suite slowed markedly, and on 5 fields it fixed one stand and added a spurious chain to a refrigerator.
-    ``keep_count``: no merges, prunes or dissolves are offered (the number of bodies was given,
-    ``--counter given``); selection then chooses only types and parents. Otherwise each structure round
-    computes the incumbent's colour costs for :func:`dissolve` on the fit's ``reassign_views`` train views
-    (without the depth test)."""
+    ``keep_count``: no merges or prunes are offered (the number of bodies was given, ``--counter given``);
+    selection then chooses only types and parents."""
 
     penalty: float | None = None
     penalty_rel: float = 0.02
@@ -116,13 +112,11 @@ def _topological(parent: list[int]) -> list[int]:
 
 
 def rebuild(model: ArticulatedGaussians, owner: list[int], parent: list[int],
-            joints: dict[int, tuple[str, np.ndarray, np.ndarray, np.ndarray]] | None = None,
-            logits: torch.Tensor | None = None) -> ArticulatedGaussians:
+            joints: dict[int, tuple[str, np.ndarray, np.ndarray, np.ndarray]] | None = None) -> ArticulatedGaussians:
     """A new model from ``model`` with body b's Gaussians given to ``owner[b]`` (``owner[b] == b`` keeps
     body b), kept bodies' parents ``parent[b]`` (old ids) and optional joint overrides
     ``joints[b] = (type, axis (3,), pivot (3,), values (S,))``. Bodies are renumbered parents first;
-    ownership logits (``logits`` (N, K+1) instead of the model's where given) of merged bodies are combined by
-    logsumexp (their soft weights add up)."""
+    ownership logits of merged bodies are combined by logsumexp (their soft weights add up)."""
     joints = joints or {}
     kept = [b for b in range(model.num_bodies) if owner[b] == b]
     sub = {b: i for i, b in enumerate(kept)}
@@ -134,7 +128,7 @@ def rebuild(model: ArticulatedGaussians, owner: list[int], parent: list[int],
             b = owner[b]
         return b
 
-    logits = (model.ownership_logits if logits is None else logits).detach()
+    logits = model.ownership_logits.detach()
     cols = [torch.logsumexp(logits[:, [b for b in range(model.num_bodies) if final(b) == k]], dim=1) for k in order]
     types, axes, pivots, values = [], [], [], []
     for k in order[1:]:
@@ -200,11 +194,10 @@ def relative_joint(model: ArticulatedGaussians, b: int, p: int, ref: int = 0,
 
 
 def candidates(model: ArticulatedGaussians, ref: int = 0, trajectories: np.ndarray | None = None,
-               search: tuple[ConsistencyViews, SearchConfig] | None = None, keep_count: bool = False,
-               costs: torch.Tensor | None = None) -> list[tuple[dict, ArticulatedGaussians]]:
-    """Every one-step edit of ``model``: merges of a leaf into any body but its parent, prunes of leaves,
-    dissolves of leaves where ``costs`` (N, K+1) are given (:func:`dissolve`; none of the three when
-    ``keep_count``), joint-type swaps, re-parents to non-descendants (each twice when ``search``
+               search: tuple[ConsistencyViews, SearchConfig] | None = None, keep_count: bool = False
+               ) -> list[tuple[dict, ArticulatedGaussians]]:
+    """Every one-step edit of ``model``: merges of a leaf into any body but its parent, prunes of leaves
+    (neither when ``keep_count``), joint-type swaps, re-parents to non-descendants (each twice when ``search``
     = (views, config) is given: its joint read off the trajectories, and found by :func:`searched_reparent`)."""
     n, parent = model.num_bodies, list(model.parent)
     out = []
@@ -216,9 +209,6 @@ def candidates(model: ArticulatedGaussians, ref: int = 0, trajectories: np.ndarr
             owner = ident.copy()
             owner[b] = parent[b]
             out.append(({"edit": "prune", "body": b}, rebuild(model, owner, parent)))
-            built = None if costs is None else dissolve(model, b, costs)
-            if built is not None:
-                out.append(({"edit": "dissolve", "body": b, "to": built[1]}, built[0]))
         if sizes[b] < 3:  # (nearly) empty: no motion to re-estimate, only pruning or merging it makes sense
             continue
         for a in range(1, n) if removable else ():
@@ -245,35 +235,6 @@ def candidates(model: ArticulatedGaussians, ref: int = 0, trajectories: np.ndarr
                 out.append(({"edit": "reparent", "body": b, "parent": p, "from": "search"},
                             searched_reparent(model, b, p, ref, *search)))
     return out
-
-
-def dissolve(model: ArticulatedGaussians, b: int, costs: torch.Tensor, confidence: float = 4.0
-             ) -> tuple[ArticulatedGaussians, dict[int, int]] | None:
-    """Leaf b removed, each of its Gaussians given to the other body under whose pose it is most
-    colour-consistent (``costs`` (N, K+1): :func:`.ownership.colour_costs` of ``model``, NaN where no view
-    sees it; an unseen one goes to b's parent); the moved Gaussians' logits are set to +/- confidence / 2.
-    -> (model, {old body id: Gaussians it received}), or None where every Gaussian goes to one body (that edit
-    is a prune or a merge, already offered).
-
-    A prune or a merge moves a body whole; a body that holds pieces of several parts (measured:
-    refrigerator-0000 ended with three bodies each mixing the cabinet and both doors, docs/pd2gs-experiments.md,
-    thirtieth entry) can only leave the model piece by piece."""
-    own = torch.nonzero(model.labels() == b).squeeze(1)
-    if len(own) == 0:
-        return None
-    c = torch.nan_to_num(costs[own].clone(), nan=float("inf"))
-    c[:, b] = float("inf")
-    to = c.argmin(1)
-    to[~torch.isfinite(c.min(1).values)] = model.parent[b]
-    received = {int(k): int((to == k).sum()) for k in torch.unique(to)}
-    if len(received) < 2:
-        return None
-    logits = model.ownership_logits.detach().clone()
-    logits[own] = -confidence / 2
-    logits[own, to] = confidence / 2
-    owner = list(range(model.num_bodies))
-    owner[b] = model.parent[b]  # b's (now losing) column joins its parent's, as a prune's does
-    return rebuild(model, owner, list(model.parent), logits=logits), received
 
 
 def searched_reparent(model: ArticulatedGaussians, b: int, p: int, ref: int, views: ConsistencyViews,
@@ -366,12 +327,7 @@ def select_model(model: ArticulatedGaussians, frames: list[Frame], masks=None, c
             scfg = SearchConfig()
             search = (ConsistencyViews(frames, masks, model.num_states, "train", scfg.views_per_state, scfg.tau_px),
                       scfg)
-        # no depth test: it compares with the incumbent's rendered surface, which is wrong exactly where a
-        # mixed body poses pieces of other parts (measured on the test's lid: with the fit's 2 % test a third
-        # of the base's rim in the mixed body counted as hidden under the base and went to the lid)
-        costs = None if cfg.keep_count else colour_costs(
-            best, frames, masks, "train", cfg.refit.reassign_views, None, cfg.refit.background, cfg.refit.backend)
-        cands = candidates(best, ref, trajectories, search if searched else None, cfg.keep_count, costs)
+        cands = candidates(best, ref, trajectories, search if searched else None, cfg.keep_count)
         if cfg.refit_top is not None and len(cands) > cfg.refit_top:
             screened = sorted(((score(c, screen, screen_masks, cfg), i) for i, (_, c) in enumerate(cands)))
             for sc, i in screened:

@@ -9,8 +9,7 @@ from pd2gs.articulated.fit import FitConfig
 from pd2gs.articulated.model import ArticulatedGaussians, canonical_gaussians
 from pd2gs.articulated.scenes import make_scene, render_scene
 from pd2gs.articulated.search import ConsistencyViews, SearchConfig
-from pd2gs.articulated.ownership import colour_costs
-from pd2gs.articulated.select import (SelectConfig, candidates, complexity, dissolve, rebuild, relative_joint,
+from pd2gs.articulated.select import (SelectConfig, candidates, complexity, rebuild, relative_joint,
                                       searched_reparent, select_model)
 
 
@@ -302,38 +301,3 @@ def test_a_chain_link_costs_one_penalty_unit_more_than_the_flat_tree():
     assert flat.joint_types == chained.joint_types == ["revolute", "revolute"]
     assert complexity(flat) == 4
     assert complexity(chained) == complexity(flat) + 1
-
-
-def lid_with_a_mixed_body(scene):
-    """The lid scene with a third body that holds pieces of both parts (the lid's half at x > 0 and the base's
-    top rim), turning with half the lid's angles: what refrigerator-0000's fit left three times over
-    (docs/pd2gs-experiments.md, thirtieth entry). A prune moves the lid's piece with the base, a merge
-    moves the base's piece with the lid."""
-    lab = scene.labels.clone()
-    lab[((lab == 1) & (scene.means[:, 0] > 0)) | ((lab == 0) & (scene.means[:, 2] > 0.25))] = 2
-    return ArticulatedGaussians(gaussians_of(scene), [-1, 0, 0], ["revolute"] * 2, np.tile(scene.axes, (2, 1)),
-                                np.tile(scene.pivots, (2, 1)), np.hstack([scene.values, 0.5 * scene.values]), lab)
-
-
-def test_dissolve_gives_each_gaussian_of_a_mixed_body_to_its_own_part():
-    torch.set_num_threads(1)
-    scene = make_scene("lid", n=1200)
-    frames, masks = render_scene(scene, views=8, size=(48, 36))
-    model = lid_with_a_mixed_body(scene)
-    mixed = model.labels() == 2
-    costs = colour_costs(model, frames, masks, depth_tol=None)  # as select_model computes them
-    built = dissolve(model, 2, costs)
-    assert built is not None
-    out, received = built
-    assert out.num_bodies == 2 and out.parent == [-1, 0]
-    assert set(received) == {0, 1}
-    right = (out.labels()[mixed] == scene.labels[mixed]).float().mean()
-    assert right > 0.9, float(right)  # a prune gets the base's share right, a merge the lid's: 62 % / 38 %
-    assert torch.equal(out.labels()[~mixed], model.labels()[~mixed])  # no other Gaussian moves
-    # offered among the candidates; a body whose Gaussians would all go to one body is a prune or a merge
-    edits = [e for e, _ in candidates(model, costs=costs) if e["edit"] == "dissolve"]
-    assert [e["body"] for e in edits] == [2] or sorted(e["body"] for e in edits) == [1, 2]
-    one_way = torch.full_like(costs, 1.0)
-    one_way[:, 0] = 0.0
-    assert dissolve(model, 2, one_way) is None
-    assert not [e for e, _ in candidates(model, costs=costs, keep_count=True) if e["edit"] == "dissolve"]
