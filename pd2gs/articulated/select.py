@@ -27,7 +27,8 @@ loop applies the best edit while it improves the score:
   Not only siblings: once selection has hung a part on another, a flat piece of it must be able to join it
   (desk_lamp-0001 kept such a piece as a spurious slide; docs/pd2gs-experiments.md, twenty-fifth entry).
 * ``prune(b)``: b's Gaussians join its parent; b's joint is dropped (b must have no children).
-* ``reparent(b, p)``: b hangs on p instead; its joint is re-estimated relative to p with
+* ``reparent(b, p)``: b hangs on p instead (p any body outside b's subtree, the base included, so a chain
+  taken in one round can be undone in a later one); its joint is re-estimated relative to p with
   :func:`pd2gs.kinematics.estimate_joint` on b's centres seen in p's frame in every state.
 * ``swap(b)``: b's joint type changes (revolute <-> prismatic), parameters from discovery's Kabsch fit
   (``robust_rigid`` + ``revolute_params`` / ``prismatic_params``) on the same centres.
@@ -223,7 +224,9 @@ def candidates(model: ArticulatedGaussians, ref: int = 0, trajectories: np.ndarr
         for c in range(1, n):  # parents precede children, one pass suffices
             if parent[c] in descendants:
                 descendants.add(c)
-        for p in range(1, n):
+        # any body but its parent and its own subtree, the base included: a chained body moved back onto the
+        # base is how selection undoes a chain it took (every edit it makes has its inverse on offer)
+        for p in range(n):
             if p == parent[b] or p in descendants:
                 continue
             par = parent.copy()
@@ -231,7 +234,7 @@ def candidates(model: ArticulatedGaussians, ref: int = 0, trajectories: np.ndarr
             out.append(({"edit": "reparent", "body": b, "parent": p, "from": "trajectories" if trajectories
                          is not None else "posed"},
                         rebuild(model, ident, par, {b: relative_joint(model, b, p, ref, trajectories)})))
-            if search is not None:
+            if search is not None and p > 0:  # onto the base: the search start already searched world joints
                 out.append(({"edit": "reparent", "body": b, "parent": p, "from": "search"},
                             searched_reparent(model, b, p, ref, *search)))
     return out
