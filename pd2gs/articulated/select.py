@@ -198,8 +198,9 @@ def candidates(model: ArticulatedGaussians, ref: int = 0, trajectories: np.ndarr
                search: tuple[ConsistencyViews, SearchConfig] | None = None, keep_count: bool = False
                ) -> list[tuple[dict, ArticulatedGaussians]]:
     """Every one-step edit of ``model``: merges of a leaf into any body but its parent, prunes of leaves
-    (neither when ``keep_count``), joint-type swaps, re-parents to non-descendants (each twice when ``search``
-    = (views, config) is given: its joint read off the trajectories, and found by :func:`searched_reparent`)."""
+    (neither when ``keep_count``), joint-type swaps, re-parents to non-descendants, the base included (onto a
+    movable body twice when ``search`` = (views, config) is given: its joint read off the trajectories, and found
+    by :func:`searched_reparent`)."""
     n, parent = model.num_bodies, list(model.parent)
     out = []
     ident = list(range(n))
@@ -225,7 +226,7 @@ def candidates(model: ArticulatedGaussians, ref: int = 0, trajectories: np.ndarr
             if parent[c] in descendants:
                 descendants.add(c)
         # any body but its parent and its own subtree, the base included: a chained body moved back onto the
-        # base is how selection undoes a chain it took (every edit it makes has its inverse on offer)
+        # base is how selection undoes a chain it took in an earlier round
         for p in range(n):
             if p == parent[b] or p in descendants:
                 continue
