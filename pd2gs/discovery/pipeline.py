@@ -434,6 +434,7 @@ def discover_starts(base: Discovery, runs: list[tuple[str, Discovery, dict]], no
     leaves the initial model as it was, so that start shares the Kabsch start's fit ("fit_of": its index in
     ``runs``) instead of repeating it."""
     plain: int | None = None  # index in runs of the fit from the initial model as it is
+    pending: list[Discovery] = []  # the runs to fit (:func:`fit_starts`)
     starts = base.cfg.start_list
     for i, start in enumerate(starts):
         last = i == len(starts) - 1  # (the last start takes the model itself: no copy to fit)
@@ -450,10 +451,38 @@ def discover_starts(base: Discovery, runs: list[tuple[str, Discovery, dict]], no
             # a search that kept nothing restored the initial model bitwise: its fit would repeat this one
             runs.append((start, runs[plain][1], {**own, "fit_of": plain}))
             continue
-        articulated_fit(run)
         if not changed:
             plain = len(runs)
+        pending.append(run)
         runs.append((start, run, own))
+    fit_starts(pending)
+
+
+def fit_starts(runs: list[Discovery]) -> None:
+    """:func:`articulated_fit` on each run, in place. With two or more CPU threads (``torch.get_num_threads()``)
+    and two or more runs, the runs' fit and selection run side by side, the threads shared out
+    (:mod:`pd2gs.discovery.side_by_side`); one thread each is also what every run gets in a suite run with one
+    thread per object, so both give the same models."""
+    threads = torch.get_num_threads()
+    n = min(len(runs), threads)
+    done = None
+    if n >= 2:
+        from .side_by_side import run_side_by_side
+
+        kept = [(run.obj, run.fld) for run in runs]
+        for run in runs:
+            run.obj = run.fld = None  # neither is read by the fit or selection, and the field does not pickle
+        try:
+            done = run_side_by_side(fit_and_select, runs, threads // n, n)
+        finally:
+            for run, (obj, fld) in zip(runs, kept):
+                run.obj, run.fld = obj, fld
+    for i, run in enumerate(runs):
+        if done is None:
+            fit_and_select(run)
+        else:
+            run.model, run.diag = done[i].model, done[i].diag
+        read_model(run)
 
 
 def polish(d: Discovery) -> None:
@@ -469,10 +498,15 @@ def polish(d: Discovery) -> None:
 
 def articulated_fit(d: Discovery) -> None:
     """From an initialised (and maybe searched) model: fit -> select -> :func:`read_model`."""
+    fit_and_select(d)
+    read_model(d)
+
+
+def fit_and_select(d: Discovery) -> None:
+    """:func:`fit`, then :func:`select` unless ``cfg.select`` is off (neither reads ``d.obj`` or ``d.fld``)."""
     fit(d)
     if d.cfg.select:
         select(d)
-    read_model(d)
 
 
 def read_model(d: Discovery) -> None:

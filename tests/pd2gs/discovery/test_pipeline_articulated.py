@@ -357,3 +357,41 @@ def test_bad_canonical_rules_are_refused_by_name(canonical):
 
     with pytest.raises(ConfigError, match="canonical"):
         DiscoveryConfig(canonical=canonical)
+
+
+def test_starts_fitted_side_by_side_give_the_models_of_one_after_another(data):
+    """With two threads the starts are fitted in two child processes of one thread each
+    (pd2gs/discovery/side_by_side.py); each gives the very model it gives fitted in this process with one
+    thread, and the choice among them is the same."""
+    from pd2gs.discovery import pipeline as P
+
+    obj = rsart.load(data / "cabinet-0000")
+    fld, _ = perfect_field(obj.twin, obj.meta, STATES, n=600, jitter=0.002)
+    fld = coloured(fld, obj)
+    bg = tuple(float(c) for c in obj.states["m0"].views[0].rgb[0, 0] / 255.0)
+    cfg = DiscoveryConfig(fit_max_side=48, background=bg, fit_iters=60, select=False, polish_iters=0,
+                          starts="kabsch,surface")  # (a search that keeps nothing shares the Kabsch fit)
+
+    def run(threads):
+        old = torch.get_num_threads()
+        torch.set_num_threads(threads)
+        try:
+            d = P.stage1(fld, obj, cfg)
+            P.articulated_parts(d)
+        finally:
+            torch.set_num_threads(old)
+        return d
+
+    alone, side = run(1), run(2)
+    assert [r["test_loss"] for r in side.diag["starts"]["runs"]] == [r["test_loss"] for r in alone.diag["starts"]["runs"]]
+    assert side.diag["starts"]["chosen"] == alone.diag["starts"]["chosen"]
+    assert torch.equal(side.model.values, alone.model.values) and np.array_equal(side.labels, alone.labels)
+    assert side.obj is obj
+
+
+def test_a_failing_child_hands_the_step_back(caplog):
+    from pd2gs.discovery.pipeline import fit_and_select
+    from pd2gs.discovery.side_by_side import run_side_by_side
+
+    assert run_side_by_side(fit_and_select, [{"not": "a run"}, {"not": "a run"}], 1, 2) is None
+    assert "fit_and_select side by side failed" in caplog.text and "AttributeError" in caplog.text
