@@ -459,7 +459,8 @@ def discover_starts(base: Discovery, runs: list[tuple[str, Discovery, dict]], no
 
 
 def fit_starts(runs: list[Discovery]) -> None:
-    """:func:`articulated_fit` on each run, in place. With two or more CPU threads (``torch.get_num_threads()``)
+    """From initialised (and maybe searched) models: :func:`fit_and_select`, then :func:`read_model`, on each run, in
+    place. With two or more CPU threads (``torch.get_num_threads()``)
     and two or more runs, the runs' fit and selection run side by side, the threads shared out
     (:mod:`pd2gs.discovery.side_by_side`); one thread each is also what every run gets in a suite run with one
     thread per object, so both give the same models."""
@@ -494,12 +495,6 @@ def polish(d: Discovery) -> None:
     res = fit_articulated(d.model, frames, masks, fit_config(d, d.cfg.polish_iters))
     d.diag["polish"] = {"seconds": time.perf_counter() - t0, "max_side": d.cfg.polish_max_side,
                         "loss_first_last": [res.losses[0], res.losses[-1]]}
-
-
-def articulated_fit(d: Discovery) -> None:
-    """From an initialised (and maybe searched) model: fit -> select -> :func:`read_model`."""
-    fit_and_select(d)
-    read_model(d)
 
 
 def fit_and_select(d: Discovery) -> None:
