@@ -78,6 +78,7 @@ def _parser() -> argparse.ArgumentParser:
     add_option(u, DiscoveryConfig, "starts")
     add_option(u, DiscoveryConfig, "canonical")
     add_option(u, DiscoveryConfig, "restarts")
+    add_option(u, DiscoveryConfig, "fit_ownership", flag="--ownership")
     for name in ("select", "refine"):
         add_option(u, DiscoveryConfig, name, negate=True)
     u.add_argument("--quiet", action="store_true", help="no progress bars")

@@ -235,9 +235,11 @@ def training_views(obj, states: list[str], cfg: DiscoveryConfig) -> tuple[list[F
 def fit_config(d: Discovery, iters: int) -> FitConfig:
     """The articulated fit's settings for this object (its gauge state, background, loss weights)."""
     c = d.cfg
+    frozen = c.fit_ownership == "frozen"
     return FitConfig(iters=iters, silhouette=c.fit_silhouette, depth=c.fit_depth, ref_state=d.ref_index,
                      background=tuple(c.background) if c.background is not None else (0.0, 0.0, 0.0),
-                     backend=c.render_backend, seed=c.seed)
+                     backend=c.render_backend, seed=c.seed,
+                     **({"lr_ownership": 0.0, "reassign_every": 0} if frozen else {}))
 
 
 def canonical_state(d: Discovery, rule: str | None = None) -> str:
@@ -608,7 +610,7 @@ def method_block(cfg: DiscoveryConfig, states_used: int | None = None) -> dict:
                               "seed": cfg.seed, "final_iters": cfg.final_iters,
                               "polish_iters": cfg.polish_iters, "polish_max_side": cfg.polish_max_side,
                               "joint_rule": cfg.joint_rule or "bic", "starts": cfg.starts,
-                              "restarts": cfg.restarts})}}
+                              "restarts": cfg.restarts, "fit_ownership": cfg.fit_ownership})}}
 
 
 def dataset_block(data: str) -> dict:

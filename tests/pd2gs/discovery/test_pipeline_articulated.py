@@ -308,6 +308,23 @@ def test_the_method_block_records_selections_settings():
             sel["seed"], sel["canonical"]) == (600, 2, 2, 9, 1, "widest")
 
 
+def test_frozen_ownership_fits_the_joints_and_leaves_every_owner_in_place(data):
+    """``fit_ownership="frozen"``: the fit moves the joints and geometry but no Gaussian changes body (the
+    free fit, from the same start, does move some); the submission's method block says which was run."""
+    from pd2gs.discovery import pipeline as P
+
+    moved = {}
+    for mode in ("free", "frozen"):
+        d = initialised_cabinet(data, "kabsch")
+        d.cfg = dataclasses.replace(d.cfg, fit_ownership=mode, fit_iters=120)
+        labels0, values0 = d.model.labels().clone(), d.model.values.detach().clone()
+        P.fit(d)
+        assert not torch.equal(d.model.values.detach(), values0)
+        moved[mode] = int((d.model.labels() != labels0).sum())
+        assert method_block(d.cfg)["discovery"]["fit_ownership"] == mode
+    assert moved["frozen"] == 0 and moved["free"] > 0, moved
+
+
 @pytest.mark.parametrize("starts", ["", "kabsch,kabsch", "grid"])
 def test_bad_starts_are_refused_by_name(starts):
     from pd2gs.config_cli import ConfigError
