@@ -233,7 +233,8 @@ def training_views(obj, states: list[str], cfg: DiscoveryConfig) -> tuple[list[F
 
 
 def fit_config(d: Discovery, iters: int) -> FitConfig:
-    """The articulated fit's settings for this object (its gauge state, background, loss weights)."""
+    """The articulated fit's settings for this object (its gauge state, background, loss weights, and whether
+    ownership may move: ``cfg.fit_ownership``)."""
     c = d.cfg
     frozen = c.fit_ownership == "frozen"
     return FitConfig(iters=iters, silhouette=c.fit_silhouette, depth=c.fit_depth, ref_state=d.ref_index,
@@ -461,9 +462,9 @@ def discover_starts(base: Discovery, runs: list[tuple[str, Discovery, dict]], no
 
 
 def fit_starts(runs: list[Discovery]) -> None:
-    """From initialised (and maybe searched) models: :func:`fit_and_select`, then :func:`read_model`, on each run, in
-    place. With two or more CPU threads (``torch.get_num_threads()``)
-    and two or more runs, the runs' fit and selection run side by side, the threads shared out
+    """From initialised (and maybe searched) models: :func:`fit_and_select`, then :func:`read_model`, on each
+    run, in place. With two or more CPU threads (``torch.get_num_threads()``) and two or more runs, the runs'
+    fit and selection run side by side, the threads shared out
     (:mod:`pd2gs.discovery.side_by_side`); one thread each is also what every run gets in a suite run with one
     thread per object, so both give the same models."""
     threads = torch.get_num_threads()

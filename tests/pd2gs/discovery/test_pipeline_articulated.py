@@ -309,7 +309,7 @@ def test_the_method_block_records_selections_settings():
 
 
 def test_frozen_ownership_fits_the_joints_and_leaves_every_owner_in_place(data):
-    """``fit_ownership="frozen"``: the fit moves the joints and geometry but no Gaussian changes body (the
+    """``fit_ownership="frozen"``: the fit moves the joints but no Gaussian changes body (the
     free fit, from the same start, does move some); the submission's method block says which was run."""
     from pd2gs.discovery import pipeline as P
 
