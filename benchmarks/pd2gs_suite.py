@@ -49,6 +49,8 @@ ABLATIONS = {  # name -> DiscoveryConfig overrides (same trained field)
     "search": {"starts": "search"},  # from the coarse joint and ownership search's joints only
     "frozen-ownership": {"fit_ownership": "frozen"},  # each Gaussian keeps its start's (or an edit's) owner in the fits
     "frozen-ownership-seed-1": {"fit_ownership": "frozen", "seed": 1},
+    "staged-ownership": {"fit_ownership": "staged"},  # each fit: first half ownership held, second half free
+    "staged-ownership-seed-1": {"fit_ownership": "staged", "seed": 1},
     "depth": {"fit_depth": 1.0},  # + an L1 depth loss (its own track: the submission's inputs name depth)
     "fit-80": {"fit_max_side": 80},  # the articulated fit's views at 80 px (the default before 2026-11-26)
     "restarts-2": {"restarts": 2},  # seeds 0 and 1, the lower held-out L1 kept

@@ -64,6 +64,9 @@ class FitConfig:
     # the first this many steps hold the geometry (means, rotations, scales) still, so the joints and
     # ownership, not a deformed canonical shape, have to explain the motion
     joint_warmup: int = 0
+    # the first this many steps hold ownership (no ownership gradient, no re-assignment), so the joints are fitted
+    # to the bodies as they start before any Gaussian may change body (docs/pd2gs-experiments.md, 35th entry)
+    ownership_warmup: int = 0
 
 
 @dataclass
@@ -75,6 +78,9 @@ class FitResult:
     reassigned: list[int] = field(default_factory=list)
     seconds: float = 0.0
     iters: int = 0
+
+
+OWNERSHIP_GROUP = 5  # index of the ownership logits in :func:`param_groups`
 
 
 def param_groups(model: ArticulatedGaussians, cfg: FitConfig) -> list[dict]:
@@ -140,7 +146,8 @@ def fit_articulated(model: ArticulatedGaussians, frames: list[Frame], masks: lis
         half = cfg.iters // 2
         decay = cfg.lr_final ** (max(0, step - half) / max(1, cfg.iters - 1 - half))
         for k, (group, lr) in enumerate(zip(opt.param_groups, base_lrs)):
-            group["lr"] = lr * decay * (0.0 if k < 3 and step < cfg.joint_warmup else 1.0)
+            held = (k < 3 and step < cfg.joint_warmup) or (k == OWNERSHIP_GROUP and step < cfg.ownership_warmup)
+            group["lr"] = 0.0 if held else lr * decay
         opt.zero_grad(set_to_none=True)
         loss = view_loss(model, frames[i], None if masks is None else masks[i], cfg, bg)
         loss.backward()
@@ -149,7 +156,7 @@ def fit_articulated(model: ArticulatedGaussians, frames: list[Frame], masks: lis
         opt.step()
         res.losses.append(float(loss.detach()))
         every = cfg.reassign_every
-        if every and (step + 1) % every == 0 and step + 1 + every <= cfg.iters:
+        if every and (step + 1) % every == 0 and step + 1 + every <= cfg.iters and step >= cfg.ownership_warmup:
             res.reassigned.append(reassign(model, frames, masks, cfg.reassign_margin, max_views=cfg.reassign_views,
                                            depth_tol=cfg.reassign_depth_tol, background=cfg.background,
                                            backend=cfg.backend))

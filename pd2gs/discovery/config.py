@@ -20,7 +20,8 @@ Ablation switches (docs/pd2gs-parts.md has the table):
   count from meta.json).
 * ``fit_silhouette``  — articulated: weight of the object-silhouette loss (0 = RGB only).
 * ``fit_depth``       — articulated: weight of a depth loss (0, the default: PD²GS is RGB-only).
-* ``fit_ownership``   — articulated: "free" (default) or "frozen" ownership during the fits.
+* ``fit_ownership``   — articulated: "free" (default), "frozen" or "staged" (held for each fit's first half)
+                        ownership during the fits.
 * ``canonical``       — articulated: the canonical state, "widest" (default), "start", or both
                         ("widest,start": each discovered, the lowest held-out loss kept).
 * ``select``          — articulated: False keeps the initial part count, tree and types.
@@ -206,11 +207,12 @@ class DiscoveryConfig:
     """weight of the L1 between rendered alpha and the view's object mask (0: RGB only)."""
     fit_depth: float = 0.0
     """weight of an L1 depth loss on pixels with a captured depth (0: RGB only, as PD²GS)."""
-    fit_ownership: Literal["free", "frozen"] = "free"
+    fit_ownership: Literal["free", "frozen", "staged"] = "free"
     """who owns each Gaussian during the articulated fits: "free" (the soft ownership logits learn and a colour
-    re-assignment runs every 100 steps) or "frozen" (each Gaussian keeps the owner the start, or selection's
-    edit, gave it; only geometry, appearance and joints are fitted). An ablation (docs/pd2gs-experiments.md,
-    thirty-fourth entry)."""
+    re-assignment runs every 100 steps), "frozen" (each Gaussian keeps the owner the start, or selection's
+    edit, gave it; only geometry, appearance and joints are fitted) or "staged" (frozen for the first half of
+    each fit's steps, free for the second: joints first, then ownership). Ablations (docs/pd2gs-experiments.md,
+    thirty-fourth and thirty-fifth entries)."""
     fit_min_opacity: float = 0.02
     """stage-1 Gaussians less opaque than this are left out of the articulated model."""
     select: bool = True

@@ -81,6 +81,21 @@ def test_joint_warmup_holds_the_geometry_still(small):
     assert not torch.equal(model.gaussians.means, means0)
 
 
+def test_ownership_warmup_holds_every_owner_before_the_joints_settle(small):
+    """``ownership_warmup``: no ownership gradient step and no colour re-assignment in the first steps, then both."""
+    scene, frames, masks = small
+    model = perturbed_lid_model(scene, Perturbation())
+    logits0, axes0 = model.ownership_logits.detach().clone(), model.axes.detach().clone()
+    res = fit_articulated(model, frames, masks, FitConfig(iters=4, ownership_warmup=4, reassign_every=1,
+                                                          harden=False))
+    assert torch.equal(model.ownership_logits.detach(), logits0) and res.reassigned == []
+    assert not torch.equal(model.axes.detach(), axes0)
+    res = fit_articulated(model, frames, masks, FitConfig(iters=6, ownership_warmup=3, reassign_every=1,
+                                                          harden=False))
+    assert not torch.equal(model.ownership_logits.detach(), logits0)
+    assert len(res.reassigned) == 2  # after step 3 and step 4 (none in the last ``reassign_every`` steps)
+
+
 def test_the_held_out_loss_adds_the_fits_silhouette_term_where_masks_are_given():
     # a white lid before a white background: the silhouette sees a lid that stays shut where colour barely does
     scene = make_scene("lid", n=1200)

@@ -8,6 +8,7 @@ import torch
 
 import rsart
 from fixture_object import build_object, perfect_field
+from pd2gs.articulated.fit import FitConfig
 from pd2gs.articulated.model import ArticulatedGaussians, canonical_gaussians
 from pd2gs.articulated.scenes import angle_between_deg, line_distance, make_scene
 from pd2gs.discovery import DiscoveryConfig
@@ -308,7 +309,7 @@ def test_the_method_block_records_selections_settings():
             sel["seed"], sel["canonical"]) == (600, 2, 2, 9, 1, "widest")
 
 
-def test_frozen_ownership_fits_the_joints_and_leaves_every_owner_in_place(data):
+def test_frozen_ownership_fits_the_joints_and_leaves_every_owner_in_place_and_staged_holds_it_half_a_fit(data):
     """``fit_ownership="frozen"``: the fit moves the joints but no Gaussian changes body (the
     free fit, from the same start, does move some); the submission's method block says which was run."""
     from pd2gs.discovery import pipeline as P
@@ -323,6 +324,11 @@ def test_frozen_ownership_fits_the_joints_and_leaves_every_owner_in_place(data):
         moved[mode] = int((d.model.labels() != labels0).sum())
         assert method_block(d.cfg)["discovery"]["fit_ownership"] == mode
     assert moved["frozen"] == 0 and moved["free"] > 0, moved
+    d.cfg = dataclasses.replace(d.cfg, fit_ownership="staged")  # held for the first half of every fit, then free
+    staged, free = P.fit_config(d, 120), FitConfig()
+    assert (staged.ownership_warmup, staged.lr_ownership, staged.reassign_every) == (60, free.lr_ownership,
+                                                                                      free.reassign_every)
+    assert method_block(d.cfg)["discovery"]["fit_ownership"] == "staged"
 
 
 @pytest.mark.parametrize("starts", ["", "kabsch,kabsch", "grid"])
