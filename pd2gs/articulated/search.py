@@ -395,9 +395,11 @@ def assign(model: ArticulatedGaussians, views: ConsistencyViews, margin: float, 
            bodies: set[int] | None = None) -> int:
     """Give each Gaussian to the body whose pose makes it most consistent with the views, where that beats
     its current owner by ``margin``; -> the number moved (logits reset to +/- confidence / 2). With
-    ``bodies`` (the bodies whose joints the search chose), a Gaussian moves only into one of them, or out
-    of one of them to the base: a joint nothing confirmed neither gains nor loses Gaussians (under a poor
-    joint a part's own Gaussians look better not moving, and would all drain to the base)."""
+    ``bodies`` (the bodies whose joints the search chose), a Gaussian moves only into one of them (from any
+    body), or out of one of them to the base: a joint nothing confirmed gains nothing and loses nothing to
+    the base (under a poor joint a part's own Gaussians look better not moving, and would all drain to the
+    base), but it can lose Gaussians to a confirmed body (refrigerator-0000: the left door's body took the
+    right door's, thirty-fifth entry of docs/pd2gs-experiments.md)."""
     c = pose_costs(model, views)
     if bodies is not None:
         cur = model.labels()
