@@ -234,13 +234,12 @@ def training_views(obj, states: list[str], cfg: DiscoveryConfig) -> tuple[list[F
 
 def fit_config(d: Discovery, iters: int) -> FitConfig:
     """The articulated fit's settings for this object (its gauge state, background, loss weights, and whether
-    ownership may move: ``cfg.fit_ownership``; "staged" holds it for the first half of the ``iters`` steps)."""
+    ownership may move: ``cfg.fit_ownership`` holds it for none, all or the first half of the ``iters`` steps)."""
     c = d.cfg
-    ownership = {"free": {}, "frozen": {"lr_ownership": 0.0, "reassign_every": 0},
-                 "staged": {"ownership_warmup": iters // 2}}[c.fit_ownership]
+    held = {"free": 0, "frozen": iters, "staged": iters // 2}[c.fit_ownership]
     return FitConfig(iters=iters, silhouette=c.fit_silhouette, depth=c.fit_depth, ref_state=d.ref_index,
                      background=tuple(c.background) if c.background is not None else (0.0, 0.0, 0.0),
-                     backend=c.render_backend, seed=c.seed, **ownership)
+                     backend=c.render_backend, seed=c.seed, ownership_warmup=held)
 
 
 def canonical_state(d: Discovery, rule: str | None = None) -> str:
