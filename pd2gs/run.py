@@ -43,7 +43,7 @@ def run(data: str | Path, out: str | Path, objects: list[str] | None = None, spl
     """
     from .discovery.config import DiscoveryConfig
     from .discovery.pipeline import dataset_block, method_block
-    from .runner import ObjectTask, assemble, default_threads, execute, import_ray, summarize
+    from .runner import ObjectTask, assemble, default_threads, execute, import_ray, summarize, variant_name
     from .train import TrainConfig
 
     if backend == "ray":
@@ -56,12 +56,16 @@ def run(data: str | Path, out: str | Path, objects: list[str] | None = None, spl
         threads = 1 if (backend == "ray" and address) else default_threads(workers or 1)
     if threads < 1:
         raise RsartError(f"threads must be at least 1, got {threads}")
+    # one result folder per discovery setting: other settings never replace a finished default result
+    name = variant_name(dcfg)
+    if name != "default":
+        log.info("discovery settings differ from the defaults: results go to runs/<object_id>/results/%s/", name)
     # absolute paths: a worker (a Ray node) need not share this process's working directory
-    tasks = [ObjectTask(str(data.resolve()), o.id, str(out.resolve() / "runs" / o.id), tcfg, {"default": dcfg},
+    tasks = [ObjectTask(str(data.resolve()), o.id, str(out.resolve() / "runs" / o.id), tcfg, {name: dcfg},
                         threads) for o in objs]
     outcomes = execute(tasks, backend, workers, address, progress)
     n_states = dcfg.n_states or len(tcfg.states or [s for s in objs[0].meta.states if s.kind == "multi"])
-    sub = assemble(tasks, "default", outcomes, out / "submission", method_block(dcfg, n_states),
+    sub = assemble(tasks, name, outcomes, out / "submission", method_block(dcfg, n_states),
                    dataset_block(str(data)))
     summarize(outcomes, out / "summary.json")
     return sub

@@ -128,6 +128,21 @@ def code_id() -> str:
     return h.hexdigest()[:16]
 
 
+def variant_name(discovery) -> str:
+    """The result folder name of a discovery configuration: ``default`` for the default settings, else
+    ``settings-<10 hex digits>`` from its settings, so a run with other settings (``pd2gs run --ownership
+    staged`` into an ``--out`` that holds a default run) writes beside the finished results instead of
+    replacing them. A ``background`` of None (the trained field's) and the field's own background name the
+    same folder, as :func:`finished_result` matches them. ``discovery``: a DiscoveryConfig."""
+    want = _norm(dataclasses.asdict(discovery))
+    base = _norm(dataclasses.asdict(type(discovery)()))
+    want.pop("background", None)
+    base.pop("background", None)
+    if want == base:
+        return "default"
+    return "settings-" + hashlib.sha256(dumps_json(want).encode()).hexdigest()[:10]
+
+
 def finished_result(run_dir: Path, variant: str, discovery=None) -> dict | None:
     """The stored ``done`` result of ``variant`` (with these discovery settings, if given, and made by this
     :func:`code_id`), else None.

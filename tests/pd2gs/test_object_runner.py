@@ -22,6 +22,16 @@ REPO = Path(__file__).resolve().parents[2]
 FAST = ["--iters", "40", "--size", "64x48", "--mode", "paper", "--no-refine", "--quiet", "--threads", "1"]
 
 
+def _variant(**settings) -> str:
+    from pd2gs.discovery.config import DiscoveryConfig
+    from pd2gs.runner import variant_name
+
+    return variant_name(DiscoveryConfig(**settings))
+
+
+VARIANT = _variant(mode="paper", refine=False)  # FAST's discovery settings
+
+
 def _has_ray() -> bool:
     try:
         import ray  # noqa: F401
@@ -91,7 +101,9 @@ def reference(data, tmp_path_factory) -> Path:
     assert sorted(summary["done"]) == ["drawer-0000", "storage-0001"], r.stdout
     for oid in summary["done"]:
         run = out / "runs" / oid
-        assert (run / "metrics.json").is_file() and (run / "results" / "default" / "result.json").is_file()
+        # FAST's settings are not the defaults: their results have a folder of their own
+        assert (run / "metrics.json").is_file() and [p.name for p in (run / "results").iterdir()] == [VARIANT]
+        assert (run / "results" / VARIANT / "result.json").is_file()
         assert "attempt on" in (run / "log.txt").read_text()
         obj = json.loads((run / "object.json").read_text())
         assert obj["status"] == "done" and obj["timings"]["train_s"] > 0
@@ -124,6 +136,38 @@ def test_rerun_skips_finished_objects(data, reference):
     assert (reference / "submission.json").stat().st_mtime_ns != before  # reassembled, same bytes
     for oid in summary["skipped"]:
         assert (out / "runs" / oid / "log.txt").read_text().count("attempt on") == 1
+
+
+@pytest.mark.slow
+def test_a_run_with_other_settings_keeps_the_finished_results(data, reference, tmp_path):
+    """`pd2gs run --joint-rule bic` into an --out that holds a finished run: the training is reused, the
+    new discovery gets its own result folder, and the first run's results are left as they were."""
+    import shutil
+
+    out = tmp_path / "out"
+    shutil.copytree(reference.parent, out)
+    first = {oid: (out / "runs" / oid / "results" / VARIANT / "result.json").read_bytes()
+             for oid in ("drawer-0000", "storage-0001")}
+    _run(data, out, "--backend", "process", "--joint-rule", "bic")
+    other = _variant(mode="paper", refine=False, joint_rule="bic")
+    assert other != VARIANT and other.startswith("settings-")
+    for oid, before in first.items():
+        results = out / "runs" / oid / "results"
+        assert sorted(p.name for p in results.iterdir()) == sorted([VARIANT, other])
+        assert (results / VARIANT / "result.json").read_bytes() == before
+        doc = json.loads((results / other / "result.json").read_text())
+        assert doc["discovery"]["joint_rule"] == "bic" and doc["status"] == "done"
+        assert (out / "runs" / oid / "log.txt").read_text().count("attempt on") == 2  # trained once: reused
+    sub = json.loads((out / "submission" / "submission.json").read_text())
+    assert sub["method"]["discovery"]["joint_rule"] == "bic"  # the submission is this command's
+
+
+def test_variant_names_follow_the_discovery_settings():
+    assert _variant() == "default"
+    assert _variant(background=(1.0, 1.0, 1.0)) == "default"  # the trained field's background: same results
+    staged = _variant(fit_ownership="staged")
+    assert staged.startswith("settings-") and len(staged) == len("settings-") + 10
+    assert staged == _variant(fit_ownership="staged") != _variant(fit_ownership="frozen")
 
 
 @pytest.mark.slow
