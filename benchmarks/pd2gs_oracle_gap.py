@@ -134,8 +134,9 @@ def starts(d, twin) -> tuple[dict, np.ndarray, dict[int, Joint]]:
 
 def body_errors(model, gt: np.ndarray, truth: dict[int, Joint]) -> list[dict]:
     """Per movable body: the true part most of its Gaussians belong to, its share of them, the body's
-    axis error to that part's joint (degrees, sign-free) and its worst value error over the states
-    (degrees or cm; the sign follows the axis), or a type mismatch."""
+    axis error to that part's joint (degrees, sign-free), its worst value error over the states
+    (degrees or cm; the sign follows the axis), or a type mismatch, and for a hinge matched to a hinge its
+    line error: the distance (cm) of the body's pivot from the true hinge line, normal to the true axis."""
     lab = model.labels().numpy()
     rows = []
     for b in range(1, model.num_bodies):
@@ -156,6 +157,9 @@ def body_errors(model, gt: np.ndarray, truth: dict[int, Joint]) -> list[dict]:
             if j["type"] == t:
                 err = np.abs(np.sign(c or 1.0) * np.asarray(j["values"]) - vals).max()
                 row["value_err"] = float(np.degrees(err) if t == "revolute" else 100 * err)
+            if j["type"] == t == "revolute":
+                q = np.asarray(j["pivot"], dtype=np.float64) - truth[p][2]
+                row["line_err_cm"] = float(100 * np.linalg.norm(q - (q @ axis) * axis))
         rows.append(row)
     return rows
 
@@ -216,6 +220,8 @@ def _bodies(rows: list[dict]) -> str:
             s += f", axis {r['axis_err_deg']:.1f}°"
         if "value_err" in r:
             s += f", value ≤ {r['value_err']:.1f}{'°' if r['type'] == 'revolute' else ' cm'}"
+        if "line_err_cm" in r:
+            s += f", line {r['line_err_cm']:.1f} cm"
         out.append(s)
     return "; ".join(out)
 
@@ -227,7 +233,7 @@ def report(recs: list[dict], arms: list[str], iters: int, header: str) -> str:
         best = min(r["arms"][a]["held_out"] for a in arms)
         lines.append(f"| {r['object_id']} | {r['canonical']} | " + " | ".join(
             f"{_cell(r['arms'][a]['held_out'], best)} ({r['arms'][a]['held_out_start']:.5f})" for a in arms) + " |")
-    lines += ["", f"## Bodies after the fit ({iters} steps): true part, purity, axis and worst value error", ""]
+    lines += ["", f"## Bodies after the fit ({iters} steps): true part, purity, axis, worst value and hinge-line errors", ""]
     for r in recs:
         lines.append(f"- **{r['object_id']}** (true sizes {r['true_sizes']}):")
         for a in arms:

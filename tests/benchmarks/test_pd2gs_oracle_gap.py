@@ -80,12 +80,14 @@ def test_body_errors_match_bodies_to_parts_and_flip_signs(bench):
     own = np.r_[np.zeros(10), np.ones(20), np.full(10, 2)].astype(int)
     # body 1: part 1's joint with the axis flipped and the values negated (the same motion), part 2's Gaussians
     # hold body 2 but as a hinge
-    m = bench.build_model(g, own, [-1, 0, 0], [("revolute", -truth[1][1], np.zeros(3), -vals),
+    # (its pivot 3 cm off the true line and 0.5 m along it)
+    m = bench.build_model(g, own, [-1, 0, 0], [("revolute", -truth[1][1], np.array([0.0, 0.03, 0.5]), -vals),
                                                ("revolute", np.array([0.0, 1, 0]), np.zeros(3), vals)])
     gt = own.copy()
     gt[10:12] = 2  # two of body 1's Gaussians belong to part 2
     rows = bench.body_errors(m, gt, truth)
     assert rows[0]["part"] == 1 and rows[0]["purity"] == pytest.approx(0.9)
     assert rows[0]["axis_err_deg"] == pytest.approx(0.0, abs=1e-4) and rows[0]["value_err"] == pytest.approx(0.0, abs=1e-6)
+    assert rows[0]["line_err_cm"] == pytest.approx(3.0, abs=1e-4)  # along the line does not count
     assert rows[1]["part"] == 2 and rows[1]["axis_err_deg"] == pytest.approx(90.0, abs=1e-4)
-    assert "value_err" not in rows[1]  # a hinge against a slide: no value comparison
+    assert "value_err" not in rows[1] and "line_err_cm" not in rows[1]  # a hinge against a slide
