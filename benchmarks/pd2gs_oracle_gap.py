@@ -1,10 +1,12 @@
-"""Benchmark (diagnostic): where PD²GS discovery's gap lies, by the articulated fit from four starts.
+"""Benchmark (diagnostic): where PD²GS discovery's gap lies, by the articulated fit from five starts.
 
 On each object's stored stage-1 field (a ``pd2gs_suite.py`` work folder: ``WORK/data`` and
 ``WORK/runs/<object_id>``) the discovery's articulated fit (its default settings, ``--iters`` steps) runs
-from four starts that differ only in who owns each Gaussian and in the joints:
+from five starts that differ only in who owns each Gaussian and in the joints:
 
 * ``kabsch``: discovery's own start (stage 1's rigid-motion clusters, their Kabsch joints, a flat tree);
+* ``search``: discovery's other start, the ``kabsch`` start after the coarse joint search
+  (:func:`pd2gs.discovery.pipeline.search`; where the search keeps nothing it is the ``kabsch`` start again);
 * ``true-ownership``: each Gaussian given its true part, the Kabsch joints re-estimated on those clusters
   (flat tree): a perfect segmentation, joints as discovery would estimate them;
 * ``true-joints``: discovery's ownership, each body given the true joint of the part most of its Gaussians
@@ -38,7 +40,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-ARMS = ("kabsch", "true-ownership", "true-joints", "truth")
+ARMS = ("kabsch", "search", "true-ownership", "true-joints", "truth")
 
 Joint = tuple  # (type, unit axis (3,), pivot (3,), values (S,)), canonical frame, values relative to the reference
 
@@ -90,7 +92,7 @@ def build_model(gaussians, ownership: np.ndarray, parent: list[int], joints: lis
 
 
 def starts(d, twin) -> tuple[dict, np.ndarray, dict[int, Joint]]:
-    """The four starts of the module doc from an initialised Discovery ``d`` -> (arm -> model, the true
+    """The starts of the module doc but ``search`` from an initialised Discovery ``d`` -> (arm -> model, the true
     labels of the model's Gaussians, part -> true joint)."""
     import torch
 
@@ -165,7 +167,7 @@ def body_errors(model, gt: np.ndarray, truth: dict[int, Joint]) -> list[dict]:
 
 
 def run_object(work: str, oid: str, arms: list[str], iters: int, threads: int = 1) -> dict:
-    """The four starts of one object, each fitted ``iters`` steps -> its record."""
+    """The starts ``arms`` of one object, each fitted ``iters`` steps -> its record."""
     import torch
 
     import rsart
@@ -193,14 +195,20 @@ def run_object(work: str, oid: str, arms: list[str], iters: int, threads: int = 
     rec = {"object_id": oid, "category": obj.meta.category, "states": d.states,
            "canonical": d.states[d.ref_index], "n_gaussians": int(len(gt)),
            "true_sizes": np.bincount(gt).tolist(), "arms": {}}
+    if "search" in arms:  # from the start as initialised, before any arm's fit changes the kabsch model
+        d.model = copy.deepcopy(models["kabsch"])
+        P.search(d)
+        models["search"] = d.model
+        rec["search_kept"] = bool(d.diag["search"]["kept"])
     for name in arms:
         m = models[name]
         before = held(m)
+        bodies_start = body_errors(m, gt, truth)
         t1 = time.time()
         torch.manual_seed(0)
         fit_articulated(m, d.frames, d.masks, fc)
         rec["arms"][name] = {"held_out_start": before, "held_out": held(m), "fit_s": time.time() - t1,
-                             "bodies": body_errors(m, gt, truth)}
+                             "bodies_start": bodies_start, "bodies": body_errors(m, gt, truth)}
     rec["seconds"] = time.time() - t0
     return rec
 
@@ -237,7 +245,10 @@ def report(recs: list[dict], arms: list[str], iters: int, header: str) -> str:
     for r in recs:
         lines.append(f"- **{r['object_id']}** (true sizes {r['true_sizes']}):")
         for a in arms:
-            lines.append(f"  - {a}: {_bodies(r['arms'][a]['bodies'])}")
+            if a == "kabsch" and "bodies_start" in r["arms"][a]:
+                lines.append(f"  - kabsch, before the fit: {_bodies(r['arms'][a]['bodies_start'])}")
+            kept = "" if a != "search" or r.get("search_kept", True) else " (kept nothing: the kabsch start)"
+            lines.append(f"  - {a}{kept}: {_bodies(r['arms'][a]['bodies'])}")
     return "\n".join(lines) + "\n"
 
 

@@ -91,3 +91,16 @@ def test_body_errors_match_bodies_to_parts_and_flip_signs(bench):
     assert rows[0]["line_err_cm"] == pytest.approx(3.0, abs=1e-4)  # along the line does not count
     assert rows[1]["part"] == 2 and rows[1]["axis_err_deg"] == pytest.approx(90.0, abs=1e-4)
     assert "value_err" not in rows[1] and "line_err_cm" not in rows[1]  # a hinge against a slide
+
+
+def test_report_names_a_search_that_kept_nothing_and_the_line_errors(bench):
+    body = {"body": 1, "part": 1, "type": "revolute", "purity": 0.5, "axis_err_deg": 1.0, "value_err": 2.0,
+            "line_err_cm": 3.25}
+    arms = ["kabsch", "search"]
+    rec = {"object_id": "lid", "canonical": "m3", "true_sizes": [5, 3], "search_kept": False,
+           "arms": {a: {"held_out": 0.01 + i / 1000, "held_out_start": 0.02, "bodies": [body],
+                        "bodies_start": [dict(body, line_err_cm=9.0)]} for i, a in enumerate(arms)}}
+    md = bench.report([rec], arms, 600, "# t")
+    assert "| lid | m3 | **0.01000** (0.02000) | 0.01100 (0.02000) |" in md
+    assert "kabsch, before the fit: b1→p1 rev 50 %, axis 1.0°, value ≤ 2.0°, line 9.0 cm" in md
+    assert "search (kept nothing: the kabsch start): b1→p1" in md and "line 3.2 cm" in md
