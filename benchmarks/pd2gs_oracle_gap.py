@@ -139,6 +139,8 @@ def body_errors(model, gt: np.ndarray, truth: dict[int, Joint]) -> list[dict]:
     axis error to that part's joint (degrees, sign-free), its worst value error over the states
     (degrees or cm; the sign follows the axis), or a type mismatch, and for a hinge matched to a hinge its
     line error: the distance (cm) of the body's pivot from the true hinge line, normal to the true axis."""
+    from rsart.metrics.joints import axis_angle_deg
+
     lab = model.labels().numpy()
     rows = []
     for b in range(1, model.num_bodies):
@@ -155,11 +157,11 @@ def body_errors(model, gt: np.ndarray, truth: dict[int, Joint]) -> list[dict]:
             a = np.asarray(j["axis"], dtype=np.float64)
             a = a / np.linalg.norm(a)
             c = float(a @ axis)
-            row["axis_err_deg"] = float(np.degrees(np.arccos(min(1.0, abs(c)))))
+            row["axis_err_deg"] = axis_angle_deg(a, axis)
             if j["type"] == t:
                 err = np.abs(np.sign(c or 1.0) * np.asarray(j["values"]) - vals).max()
                 row["value_err"] = float(np.degrees(err) if t == "revolute" else 100 * err)
-            if j["type"] == t == "revolute":
+            if j["type"] == t == "revolute":  # not the scorer's line_distance: skew lines can cross far from the part
                 q = np.asarray(j["pivot"], dtype=np.float64) - truth[p][2]
                 row["line_err_cm"] = float(100 * np.linalg.norm(q - (q @ axis) * axis))
         rows.append(row)

@@ -3,12 +3,10 @@
 write_report: a report's table and record never go to one file."""
 from __future__ import annotations
 
-import importlib.util
 import json
 import platform
-from pathlib import Path
 
-COMMON = Path(__file__).resolve().parents[2] / "benchmarks" / "common.py"
+from tests.benchmarks.bench_helpers import load
 
 CPUINFO = """processor\t: 0
 vendor_id\t: AuthenticAMD
@@ -27,10 +25,7 @@ flags\t\t: fpu
 
 
 def _common():
-    spec = importlib.util.spec_from_file_location("bench_common", COMMON)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load("common.py")
 
 
 def test_first_cpu_model_clock_and_widest_avx(tmp_path):

@@ -6,27 +6,17 @@ comparison meaningless. Real procedural twins (a stand: a hinge carried by a hin
 """
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 import torch
 
-BENCH = Path(__file__).resolve().parents[2] / "benchmarks"
+from tests.benchmarks.bench_helpers import on_path
 
 
 @pytest.fixture(scope="module")
 def bench():
-    sys.path.insert(0, str(BENCH))
-    try:
-        spec = importlib.util.spec_from_file_location("pd2gs_oracle_gap_bench", BENCH / "pd2gs_oracle_gap.py")
-        mod = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(mod)
+    with on_path("pd2gs_oracle_gap.py") as mod:
         yield mod
-    finally:
-        sys.path.remove(str(BENCH))
 
 
 def _values(twin, fracs, ref_frac):

@@ -1,25 +1,15 @@
 """The pure parts of benchmarks/pd2gs_partnet.py: target arithmetic, null/missing objects, the report, bad input."""
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import pytest
 
-BENCH = Path(__file__).resolve().parents[2] / "benchmarks"
+from tests.benchmarks.bench_helpers import on_path
 
 
 @pytest.fixture(scope="module")
 def bench():
-    sys.path.insert(0, str(BENCH))  # the script imports its sibling pd2gs_suite, as when run from benchmarks/
-    try:
-        spec = importlib.util.spec_from_file_location("pd2gs_partnet_bench", BENCH / "pd2gs_partnet.py")
-        mod = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(mod)
+    with on_path("pd2gs_partnet.py") as mod:  # it imports its sibling pd2gs_suite
         yield mod
-    finally:
-        sys.path.remove(str(BENCH))
 
 
 def _part(name, ang, typ="revolute", pred="p1"):

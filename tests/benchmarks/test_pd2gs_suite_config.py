@@ -3,21 +3,15 @@ them all by default and a stale row only fails after hours of training."""
 from __future__ import annotations
 
 import dataclasses
-import importlib.util
-from pathlib import Path
 
 import pytest
 
 from pd2gs.discovery import DiscoveryConfig
-
-SUITE = Path(__file__).resolve().parents[2] / "benchmarks" / "pd2gs_suite.py"
+from tests.benchmarks.bench_helpers import load
 
 
 def _suite():
-    spec = importlib.util.spec_from_file_location("pd2gs_suite_bench", SUITE)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load("pd2gs_suite.py")
 
 
 @pytest.mark.parametrize("name", list(_suite().ABLATIONS))
