@@ -36,20 +36,20 @@ least ``min_explained`` of the cost its Gaussians have when not moving: where a 
 stays inside the object's silhouette and matches the colours behind it (a white refrigerator's door), no
 hypothesis is much better than not moving, and the search leaves the joint alone.
 
-**Ownership.** After each body's search (bodies largest first), each Gaussian goes to the pose under which
-its cost is lowest, where that beats its current owner by ``margin`` (:func:`assign`), but only into a
-body whose joint the search chose or out of one to the base; ``rounds`` times. (Measured on stand-0000:
-re-assigning under joints the search had left alone drained 5874 of the parts' 7822 Gaussians to the
-base, since under a poor joint a part's Gaussians look better not moving, and the fit then turned the
-arm into a slide.)
+**All bodies at once, ownership left alone.** Every body is searched on the *starting* model (the other
+bodies at their starting joints) and all picks are set together, as :mod:`.surfaces` does; the Gaussians stay
+with their owners, and the gradient fit's own re-assignment moves them. Searched largest first instead, each body
+on the model the earlier searches had changed, with Gaussians re-assigned by the projection score after each,
+the refrigerator's left door took the right door's Gaussians and the right door's hinge was never found
+(docs/pd2gs-experiments.md, thirty-fifth entry). Measured on six stage-1 fields, two seeds
+(benchmarks/results/pd2gs-rsart-synth-6-zen3-search-together.md): kept on four, this start then wins model
+selection on all four in both seeds, and the revolute Part Motion mean drops (68.1° -> 56.8°, 57.1° -> 54.3°).
 
 **Rendered turn and check.** The projection score finds a hinge's line but can be fooled on its turn, so
-each hinge the search chose has its far value chosen again by rendering (:func:`rendered_turn`), and the
-whole result is kept only if the model's rendered held-out loss (:func:`rendered_loss` on every held-out
-view: what model selection scores) is lower than the starting model's. With ``turn_views`` = 0 the
-projection score's turn is kept and the check is the projection cost, summed over every Gaussian under
-its owner, on ``check_views`` held-out views per state (:func:`model_cost`). The gradient fit
-(:mod:`.fit`) refines everything after.
+every hinge then has its far value chosen again by rendering (:func:`rendered_turn`, ``turn_steps`` far
+values, 5° apart at 73), each with the other bodies at their picks; the whole result is kept only if the
+model's rendered held-out loss (:func:`rendered_loss` on every held-out view: what model selection scores)
+is lower than the starting model's. The gradient fit (:mod:`.fit`) refines everything after.
 """
 from __future__ import annotations
 
@@ -64,7 +64,7 @@ from pd2gs.data import Frame
 
 from .fit import evaluate_views
 from .model import ArticulatedGaussians, axis_angle_matrix
-from .ownership import move_to_cheapest, view_subset
+from .ownership import view_subset
 
 Hypothesis = tuple[str, np.ndarray, np.ndarray, np.ndarray]  # (type, unit axis (3,), pivot (3,), values (S,))
 
@@ -74,9 +74,8 @@ class SearchConfig:
     """Grid sizes and rules of :func:`search_joints` (see the module doc). ``max_points``: a body is scored
     on at most this many of its own most opaque Gaussians and as many of its neighbours'; ``ramp`` (S,)
     the far value's share in each state (None: linear from the ``ref`` state). ``turn_views``: train views
-    per moved state rendered to choose a chosen hinge's turn among ``turn_steps`` far values (0: the
-    projection score's turn is kept, and so is its held-out check); ``silhouette``, ``background``,
-    ``backend``: the rendered score's, as the fit's."""
+    per moved state rendered to choose each hinge's turn among ``turn_steps`` far values in [-pi, pi];
+    ``silhouette``, ``background``, ``backend``: the rendered score's, as the fit's."""
 
     n_axes: int = 64
     pivot_grid: int = 5
@@ -90,13 +89,10 @@ class SearchConfig:
     levels: int = 5
     tau_px: float = 6.0
     min_explained: float = 0.5
-    rounds: int = 2
-    margin: float = 0.05
-    check_views: int = 4
     ramp: list[float] | None = None
     batch: int = 256
     turn_views: int = 4
-    turn_steps: int = 25
+    turn_steps: int = 73
     silhouette: float = 0.5
     background: tuple[float, float, float] = (1.0, 1.0, 1.0)
     backend: str = "cpu"
@@ -104,12 +100,11 @@ class SearchConfig:
 
 @dataclass
 class SearchResult:
-    """Per body the chosen joint and its scores; ``moved`` Gaussians re-assigned per round; ``held_out``
-    the model's cost on the held-out views before and after; ``kept``: whether the result replaced the
-    starting model."""
+    """Per body the chosen joint, its projection scores and (hinges) its rendered turn's scores; ``held_out``
+    the model's rendered loss on the held-out views before and after (None without held-out views);
+    ``kept``: whether the result replaced the starting model."""
 
     chosen: dict[int, dict] = field(default_factory=dict)
-    moved: list[int] = field(default_factory=list)
     held_out: tuple[float, float] | None = None
     kept: bool = True
 
@@ -381,37 +376,6 @@ def pose_costs(model: ArticulatedGaussians, views: ConsistencyViews) -> torch.Te
     return views.cost(X, g.colors.detach().float()).T
 
 
-@torch.no_grad()
-def model_cost(model: ArticulatedGaussians, views: ConsistencyViews) -> float:
-    """Opacity-weighted mean consistency cost of every Gaussian under its hard owner's pose."""
-    c = pose_costs(model, views)
-    w = model.gaussians.opacities.detach().reshape(-1).float()
-    own = c.gather(1, model.labels()[:, None])[:, 0]
-    return float((own * w).sum() / w.sum().clamp_min(1e-12))
-
-
-@torch.no_grad()
-def assign(model: ArticulatedGaussians, views: ConsistencyViews, margin: float, confidence: float = 4.0,
-           bodies: set[int] | None = None) -> int:
-    """Give each Gaussian to the body whose pose makes it most consistent with the views, where that beats
-    its current owner by ``margin``; -> the number moved (logits reset to +/- confidence / 2). With
-    ``bodies`` (the bodies whose joints the search chose), a Gaussian moves only into one of them (from any
-    body), or out of one of them to the base: a joint nothing confirmed gains nothing and loses nothing to
-    the base (under a poor joint a part's own Gaussians look better not moving, and would all drain to the
-    base), but it can lose Gaussians to a confirmed body (refrigerator-0000: the left door's body took the
-    right door's, thirty-fifth entry of docs/pd2gs-experiments.md)."""
-    c = pose_costs(model, views)
-    if bodies is not None:
-        cur = model.labels()
-        allowed = torch.zeros(model.num_bodies, dtype=torch.bool)
-        allowed[sorted(bodies)] = True
-        ok = allowed[None].expand(c.shape[0], -1).clone()           # into a chosen body
-        ok[:, 0] = allowed[cur]                                     # to the base: only out of a chosen one
-        ok[torch.arange(c.shape[0]), cur] = True
-        c = torch.where(ok, c, torch.full_like(c, float("inf")))
-    return move_to_cheapest(model, c, margin, confidence)
-
-
 def rendered_loss(model: ArticulatedGaussians, frames: list[Frame], idx: list[int], masks, cfg: SearchConfig
                   ) -> float:
     """:func:`.fit.evaluate_views` (render L1 + ``cfg.silhouette`` x |alpha - mask|, what model selection
@@ -451,43 +415,32 @@ def rendered_turn(model: ArticulatedGaussians, j: int, frames: list[Frame], mask
 @torch.no_grad()
 def search_joints(model: ArticulatedGaussians, frames: list[Frame], masks=None, ref: int = 0,
                   cfg: SearchConfig | None = None) -> SearchResult:
-    """Search every movable body's joint and re-assign the Gaussians, ``cfg.rounds`` times, in place; the
-    starting model is restored when the held-out views do not confirm the result (see the module doc).
-    ``masks``: per frame the object silhouette (H, W) or None (then colour alone scores)."""
+    """Every movable body's joint searched on the starting model, all set together, every hinge's turn
+    chosen by rendering, in place; ownership is left alone, and the starting model is restored when the
+    held-out views do not confirm the result (see the module doc). ``masks``: per frame the object
+    silhouette (H, W) or None (then colour alone scores)."""
     cfg = cfg or SearchConfig()
     S = model.num_states
     if not any(f.split == "train" for f in frames):
         raise ValueError("frames: the joint search needs training views (split 'train')")
+    if cfg.turn_views < 1 or cfg.turn_steps < 2:
+        raise ValueError(f"cfg: turn_views ({cfg.turn_views}) must be >= 1 and turn_steps ({cfg.turn_steps}) >= 2")
     views = ConsistencyViews(frames, masks, S, "train", cfg.views_per_state, cfg.tau_px)
-    check = None
-    if all(any(f.split == "test" and f.state == s for f in frames) for s in range(S)):
-        check = ConsistencyViews(frames, masks, S, "test", cfg.check_views, cfg.tau_px)
     ramp = np.asarray(cfg.ramp, dtype=np.float64) if cfg.ramp is not None else _ramp(S, ref)
     saved = {k: v.detach().clone() for k, v in model.state_dict().items()}
     types = list(model.joint_types)
     held = [i for i, f in enumerate(frames) if f.split == "test"]
-
-    def held_out() -> float:  # rendered when turns are (the projection score is what a turn can fool)
-        return rendered_loss(model, frames, held, masks, cfg) if cfg.turn_views else model_cost(model, check)
-
-    before = held_out() if check is not None else None
+    before = rendered_loss(model, frames, held, masks, cfg) if held else None
     res = SearchResult()
-    chosen: set[int] = set()
-    for _ in range(max(1, cfg.rounds)):
-        moved = 0
-        for b in sorted(range(1, model.num_bodies), key=lambda b: -int((model.labels() == b).sum())):
-            start, score, h = search_body(model, b, views, ramp, cfg)
-            _set_joint(model, b - 1, *h)
-            res.chosen[b] = {"type": h[0], "score_before": start, "score_after": score}
-            if cfg.turn_views and score < start and h[0] == "revolute":
-                res.chosen[b]["rendered_turn"] = rendered_turn(model, b - 1, frames, masks, ramp, cfg)
-            if score < start:
-                chosen.add(b)
-            if chosen:
-                moved += assign(model, views, cfg.margin, bodies=chosen)
-        res.moved.append(moved)
-    if check is not None:
-        after = held_out()
+    found = {b: search_body(model, b, views, ramp, cfg) for b in range(1, model.num_bodies)}
+    for b, (start, score, h) in found.items():
+        _set_joint(model, b - 1, *h)
+        res.chosen[b] = {"type": h[0], "score_before": start, "score_after": score}
+    for b in found:
+        if model.joint_types[b - 1] == "revolute":
+            res.chosen[b]["rendered_turn"] = rendered_turn(model, b - 1, frames, masks, ramp, cfg)
+    if before is not None:
+        after = rendered_loss(model, frames, held, masks, cfg)
         res.held_out = (before, after)
         if after >= before:
             model.load_state_dict(saved)

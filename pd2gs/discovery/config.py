@@ -189,8 +189,8 @@ class DiscoveryConfig:
     # --- the articulated model (mode "articulated"; pd2gs/articulated/)
     starts: str = "kabsch,search"
     """the first joints the articulated fit starts from, a comma list: ``kabsch`` (stage 1's Kabsch joints
-    on its motion clusters), ``search`` (those after the coarse joint and ownership search by projection,
-    pd2gs/articulated/search.py) and ``surface`` (each body's joint searched against the surfaces stage 1's
+    on its motion clusters), ``search`` (each body's joint searched by projection, all set together, hinge turns by
+    rendering; pd2gs/articulated/search.py) and ``surface`` (each body's joint searched against the surfaces stage 1's
     field renders in each state, pd2gs/articulated/surfaces.py). Each start (times ``restarts``) is
     discovered to the end and the model with the lowest held-out loss kept (L1, plus the silhouette term at
     ``fit_silhouette`` where views have masks). ``surface`` is opt-in: on 15

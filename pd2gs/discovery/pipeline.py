@@ -288,13 +288,14 @@ def initialise(d: Discovery, ref: str | None = None) -> None:
 
 
 def search(d: Discovery) -> None:
-    """Each body's joint and the Gaussians it owns chosen by how well the posed Gaussians agree with the
-    training views, kept where the held-out views agree too (:mod:`pd2gs.articulated.search`)."""
+    """Each body's joint chosen by how well the posed Gaussians agree with the training views (all bodies
+    at once, hinge turns by rendering), kept where the held-out views agree too
+    (:mod:`pd2gs.articulated.search`); ownership is left to the fit."""
     t0 = time.perf_counter()
     fc = fit_config(d, 0)
     res = search_joints(d.model, d.frames, d.masks, d.ref_index,
                         SearchConfig(silhouette=fc.silhouette, background=fc.background, backend=fc.backend))
-    d.diag["search"] = {"seconds": time.perf_counter() - t0, "bodies": res.chosen, "moved": res.moved,
+    d.diag["search"] = {"seconds": time.perf_counter() - t0, "bodies": res.chosen,
                         "held_out": res.held_out, "kept": res.kept}
 
 

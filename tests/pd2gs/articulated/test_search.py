@@ -1,5 +1,6 @@
 """The coarse joint search (pd2gs/articulated/search.py) on the small lid scene: from starts no gradient fit
-recovers from, to within the fit's reach; ownership follows the joints; held-out views can veto it."""
+recovers from, to within the fit's reach; every body searched on the starting model, ownership left alone;
+held-out views can veto it."""
 from __future__ import annotations
 
 import math
@@ -14,7 +15,7 @@ from pd2gs.articulated.search import ConsistencyViews, SearchConfig, search_join
 
 WRONG_AXIS = (-0.5, 0.0, 0.8660254037844386)  # the lid's hinge axis (-x) turned 60° towards +z
 # a coarser grid than the default (the scene is small and the suite is timed): 32 axes, 4 views per state
-SMALL = dict(n_axes=32, views_per_state=4, rounds=1)
+SMALL = dict(n_axes=32, views_per_state=4)
 
 
 @pytest.fixture(scope="module")
@@ -73,7 +74,10 @@ def test_the_search_turns_a_lid_started_as_a_slide_60_degrees_off_into_its_hinge
     assert_near_the_hinge(model, 0, scene)
 
 
-def test_two_fragments_of_the_lid_give_the_lid_to_the_one_that_finds_its_hinge(lid):
+def test_two_fragments_of_the_lid_each_find_its_hinge_and_keep_their_gaussians(lid):
+    """The lid split into two bodies (a slide 60° off and a vertical hinge), a third of it given to the base:
+    each fragment is searched on the starting model, both land near the lid's hinge, and no Gaussian changes
+    owner (ownership is the fit's)."""
     scene, frames, masks = lid
     labels = scene.labels.clone()
     idx = torch.nonzero(labels == 1)[:, 0]
@@ -83,14 +87,35 @@ def test_two_fragments_of_the_lid_give_the_lid_to_the_one_that_finds_its_hinge(l
     model = model_of(scene, labels, ["prismatic", "revolute"], [WRONG_AXIS, [0.0, 0.0, 1.0]], [c, c],
                      np.stack([np.linspace(0, 0.05, 4), np.linspace(0, 0.5, 4)], 1))
     res = search_joints(model, frames, masks, 0, SearchConfig(**SMALL))
-    assert res.kept and sum(res.moved) > 0
-    now = model.labels()
-    sizes = np.bincount(now[scene.labels == 1].numpy(), minlength=3)
-    carrier = int(np.argmax(sizes[1:])) + 1
-    assert sizes[carrier] > 0.6 * (scene.labels == 1).sum()  # one body holds most of the lid (each held 1/3)
-    assert_near_the_hinge(model, carrier - 1, scene)
-    assert float((now[scene.labels == 1] > 0).float().mean()) > 0.8  # the lid on movable bodies: was 2/3
-    assert float((now[scene.labels == 0] == 0).float().mean()) > 0.95  # the base stays
+    assert res.kept and res.held_out[1] < res.held_out[0]
+    assert torch.equal(model.labels(), labels)
+    for j in (0, 1):
+        assert res.chosen[j + 1]["score_after"] < res.chosen[j + 1]["score_before"]
+        assert "rendered_turn" in res.chosen[j + 1]
+        assert_near_the_hinge(model, j, scene)
+
+
+def test_each_body_is_searched_on_the_starting_model_not_on_the_other_bodies_picks(lid):
+    """Each fragment's joint (type, axis, pivot) is what :func:`search_body` picks for it on the untouched
+    starting model: the other fragment's pick, set first, does not change it."""
+    import copy
+
+    from pd2gs.articulated.search import _ramp, search_body
+
+    scene, frames, masks = lid
+    labels = scene.labels.clone()
+    idx = torch.nonzero(labels == 1)[:, 0]
+    labels[idx[scene.means[idx, 1] > scene.means[idx, 1].median()]] = 2
+    c = lid_centre(scene)
+    model = model_of(scene, labels, ["prismatic", "revolute"], [WRONG_AXIS, [0.0, 0.0, 1.0]], [c, c],
+                     np.stack([np.linspace(0, 0.05, 4), np.linspace(0, 0.5, 4)], 1))
+    cfg = SearchConfig(**SMALL)
+    views = ConsistencyViews(frames, masks, 4, "train", cfg.views_per_state, cfg.tau_px)
+    alone = [search_body(copy.deepcopy(model), b, views, _ramp(4, 0), cfg)[2] for b in (1, 2)]
+    search_joints(model, frames, masks, 0, cfg)
+    for j, (t, axis, pivot, _) in enumerate(alone):
+        assert model.joint_types[j] == t
+        assert np.allclose(model.axes[j].detach().numpy(), axis) and np.allclose(model.pivots[j].detach().numpy(), pivot)
 
 
 def test_held_out_views_that_show_the_starting_joint_veto_the_search(lid):
@@ -125,22 +150,6 @@ def test_a_body_that_never_moves_keeps_its_joint():
     assert res.chosen[1]["score_after"] == res.chosen[1]["score_before"]
     assert model.joint_types == ["prismatic"]
     assert torch.equal(model.axes.detach(), axis0) and torch.equal(model.values.detach(), values0)
-
-
-def test_gaussians_do_not_drain_from_a_body_whose_joint_the_search_did_not_choose(lid):
-    """Under a wrong 30 cm slide the lid's Gaussians match the views better not moving: free re-assignment
-    drains them to the base; restricted to the bodies the search chose (none here), nothing moves."""
-    from pd2gs.articulated.search import assign
-
-    scene, frames, masks = lid
-    views = ConsistencyViews(frames, masks, 4, per_state=4)
-    model = model_of(scene, scene.labels, ["prismatic"], [WRONG_AXIS], [lid_centre(scene)],
-                     np.linspace(0, 0.3, 4)[:, None])
-    assert assign(model, views, 0.05, bodies=set()) == 0
-    assert torch.equal(model.labels(), scene.labels)
-    n_lid = int((scene.labels == 1).sum())
-    drained = assign(model, views, 0.05)
-    assert drained > 0.3 * n_lid and int((model.labels() == 1).sum()) == n_lid - drained
 
 
 def test_a_hinge_on_its_true_line_turned_the_wrong_way_gets_its_turn_back_by_rendering(lid):

@@ -202,7 +202,7 @@ def test_the_search_step_records_its_choice_and_keeps_a_near_exact_start_near(da
     obj = d.obj
     P.search(d)
     s = d.diag["search"]
-    assert s["seconds"] > 0 and set(s["bodies"]) == set(range(1, d.model.num_bodies)) and len(s["moved"]) == 2
+    assert s["seconds"] > 0 and set(s["bodies"]) == set(range(1, d.model.num_bodies))
     assert isinstance(s["kept"], bool) and len(s["held_out"]) == 2
     gt = {j.name: (np.array(j.axis, float), j.type) for j in obj.meta.joints}
     found = set()
