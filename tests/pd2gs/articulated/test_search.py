@@ -14,8 +14,9 @@ from pd2gs.articulated.scenes import angle_between_deg, line_distance, make_scen
 from pd2gs.articulated.search import ConsistencyViews, SearchConfig, search_joints
 
 WRONG_AXIS = (-0.5, 0.0, 0.8660254037844386)  # the lid's hinge axis (-x) turned 60° towards +z
-# a coarser grid than the default (the scene is small and the suite is timed): 32 axes, 4 views per state
-SMALL = dict(n_axes=32, views_per_state=4)
+# a coarser grid than the default (the scene is small and the suite is timed): 32 axes, 4 views per state,
+# 25 far values for a rendered turn (15°)
+SMALL = dict(n_axes=32, views_per_state=4, turn_steps=25)
 
 
 @pytest.fixture(scope="module")
