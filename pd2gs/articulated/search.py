@@ -412,6 +412,16 @@ def rendered_turn(model: ArticulatedGaussians, j: int, frames: list[Frame], mask
     return start, best
 
 
+def search_bodies(model: ArticulatedGaussians, views, ramp: np.ndarray, cfg: SearchConfig) -> dict[int, dict]:
+    """Every movable body's joint by :func:`search_body` on the *starting* model, then all set together, in
+    place (a body searched after another had moved chooses differently; see the module doc) -> per body
+    {"type", "score_before", "score_after"}. ``views``: anything with the :class:`ConsistencyViews` cost."""
+    found = {b: search_body(model, b, views, ramp, cfg) for b in range(1, model.num_bodies)}
+    for b, (_, _, h) in found.items():
+        _set_joint(model, b - 1, *h)
+    return {b: {"type": h[0], "score_before": before, "score_after": after} for b, (before, after, h) in found.items()}
+
+
 @torch.no_grad()
 def search_joints(model: ArticulatedGaussians, frames: list[Frame], masks=None, ref: int = 0,
                   cfg: SearchConfig | None = None) -> SearchResult:
@@ -432,11 +442,8 @@ def search_joints(model: ArticulatedGaussians, frames: list[Frame], masks=None, 
     held = [i for i, f in enumerate(frames) if f.split == "test"]
     before = rendered_loss(model, frames, held, masks, cfg) if held else None
     res = SearchResult()
-    found = {b: search_body(model, b, views, ramp, cfg) for b in range(1, model.num_bodies)}
-    for b, (start, score, h) in found.items():
-        _set_joint(model, b - 1, *h)
-        res.chosen[b] = {"type": h[0], "score_before": start, "score_after": score}
-    for b in found:
+    res.chosen = search_bodies(model, views, ramp, cfg)
+    for b in res.chosen:
         if model.joint_types[b - 1] == "revolute":
             res.chosen[b]["rendered_turn"] = rendered_turn(model, b - 1, frames, masks, ramp, cfg)
     if before is not None:

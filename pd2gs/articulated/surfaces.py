@@ -41,7 +41,7 @@ from pd2gs.data import Frame, backproject_frames
 
 from .model import ArticulatedGaussians
 from .ownership import view_subset
-from .search import SearchConfig, _ramp, _set_joint, search_body
+from .search import SearchConfig, _ramp, search_bodies
 
 
 def field_surfaces(gaussians: list[dict], frames: list[Frame], per_state: int = 16, alpha_min: float = 0.5,
@@ -130,10 +130,6 @@ def search_surfaces(model: ArticulatedGaussians, surfaces: SurfaceViews, ref: in
     t0 = time.perf_counter()
     cfg = dataclasses.replace(cfg or SearchConfig(), min_explained=0.0)
     ramp = np.asarray(cfg.ramp, dtype=np.float64) if cfg.ramp is not None else _ramp(model.num_states, ref)
-    res = SurfaceSearchResult()
-    found = {b: search_body(model, b, surfaces, ramp, cfg) for b in range(1, model.num_bodies)}
-    for b, (before, after, h) in found.items():
-        _set_joint(model, b - 1, *h)
-        res.chosen[b] = {"type": h[0], "score_before": before, "score_after": after}
+    res = SurfaceSearchResult(chosen=search_bodies(model, surfaces, ramp, cfg))
     res.seconds = time.perf_counter() - t0
     return res

@@ -116,7 +116,8 @@ def test_each_body_is_searched_on_the_starting_model_not_on_the_other_bodies_pic
     search_joints(model, frames, masks, 0, cfg)
     for j, (t, axis, pivot, _) in enumerate(alone):
         assert model.joint_types[j] == t
-        assert np.allclose(model.axes[j].detach().numpy(), axis) and np.allclose(model.pivots[j].detach().numpy(), pivot)
+        assert np.allclose(model.axes[j].detach().numpy(), axis)
+        assert np.allclose(model.pivots[j].detach().numpy(), pivot)
 
 
 def test_held_out_views_that_show_the_starting_joint_veto_the_search(lid):
