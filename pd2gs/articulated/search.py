@@ -449,8 +449,9 @@ def search_joints(model: ArticulatedGaussians, frames: list[Frame], masks=None, 
     S = model.num_states
     if not any(f.split == "train" for f in frames):
         raise ValueError("frames: the joint search needs training views (split 'train')")
-    if cfg.turn_views < 1 or cfg.turn_steps < 2:
-        raise ValueError(f"cfg: turn_views ({cfg.turn_views}) must be >= 1 and turn_steps ({cfg.turn_steps}) >= 2")
+    if cfg.turn_views < 1 or cfg.turn_steps < 2 or cfg.turn_refine < 0:
+        raise ValueError(f"cfg: turn_views ({cfg.turn_views}) must be >= 1, turn_steps ({cfg.turn_steps}) >= 2 and "
+                         f"turn_refine ({cfg.turn_refine}) >= 0")
     views = ConsistencyViews(frames, masks, S, "train", cfg.views_per_state, cfg.tau_px)
     ramp = np.asarray(cfg.ramp, dtype=np.float64) if cfg.ramp is not None else _ramp(S, ref)
     saved = {k: v.detach().clone() for k, v in model.state_dict().items()}
