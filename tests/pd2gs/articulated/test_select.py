@@ -11,8 +11,8 @@ from pd2gs.articulated.fit import FitConfig
 from pd2gs.articulated.model import ArticulatedGaussians, canonical_gaussians
 from pd2gs.articulated.scenes import make_scene, render_scene
 from pd2gs.articulated.search import ConsistencyViews, SearchConfig
-from pd2gs.articulated.select import (SelectConfig, candidates, complexity, rebuild, relative_joint,
-                                      searched_reparent, select_model)
+from pd2gs.articulated.select import (SelectConfig, candidates, complexity, hard_posed_means, keep_children,
+                                      rebuild, relative_joint, searched_reparent, select_model)
 
 
 def gaussians_of(scene):
@@ -149,6 +149,31 @@ def chained_flap_with_a_flat_piece(scene):
     return ArticulatedGaussians(gaussians_of(scene), [-1, 0, 1, 0], list(scene.joint_types) + [t],
                                 np.vstack([scene.axes, a]), np.vstack([scene.pivots, p]),
                                 np.hstack([scene.values, np.asarray(v)[:, None]]), lab)
+
+
+def test_a_swap_of_the_lids_type_re_joints_the_flap_it_carries():
+    """The lid made a slide and back into its hinge: with the flap re-jointed to the lid's new motion each
+    time, the flap's angles are the truth's again; dragged along, they are off by the lid's angle."""
+    scene = make_scene("flap", n=600)
+    truth = truth_model(scene)
+    ident, parent = [0, 1, 2], list(truth.parent)
+    slide = relative_joint(truth, 1, 0, trajectories=trajectories(scene), joint_type="prismatic")
+    slid = keep_children(truth, rebuild(truth, ident, parent, {1: slide}), 1, 0)
+    hinge = ("revolute", scene.axes[0], scene.pivots[0], scene.values[:, 0])
+    dragged = rebuild(slid, ident, parent, {1: hinge})
+    back = keep_children(slid, dragged, 1, 0)
+
+    def flap_angles(m):  # the flap's values about the truth's axis direction
+        sign = float(np.sign(m.unit_axes[1].detach().double().numpy() @ scene.axes[1]))
+        return sign * m.values[:, 1].detach().double().numpy()
+
+    assert back.joint_types == ["revolute", "revolute"] and back.parent == [-1, 0, 1]
+    assert np.abs(flap_angles(back) - scene.values[:, 1]).max() < 0.01
+    assert np.abs(flap_angles(dragged) - scene.values[:, 1]).max() > 0.5
+    assert keep_children(truth, dragged, 2, 0) is dragged  # a body without children: nothing to re-joint
+    # the re-jointed flap is posed from its parent's new motion, not the old one
+    flap = (truth.labels() == 2).numpy()
+    assert np.abs(hard_posed_means(back)[:, flap] - hard_posed_means(dragged)[:, flap]).max() > 0.05
 
 
 def test_a_leaf_may_merge_into_a_body_that_is_not_its_sibling():
