@@ -171,21 +171,22 @@ class ArticulatedGaussians(nn.Module):
             qs.append(quat_mul(qs[p], qj))
         return BodyPoses(torch.stack(Rs), torch.stack(ts), torch.stack(qs))
 
-    def pose(self, state: int | None = None, values: torch.Tensor | None = None
+    def pose(self, state: int | None = None, values: torch.Tensor | None = None, hard: bool | None = None
              ) -> tuple[torch.Tensor, torch.Tensor]:
         """Posed Gaussians in one state -> (means (N, 3) m, quats (N, 4) (w, x, y, z)), world frame.
 
         Soft: ``mu = sum_b w_ib (R_b mu_i + t_b)`` and ``q = normalise(sum_b w_ib q_b) * q_i`` (body
         quaternions are blended in the hemisphere of the base's identity). Hard: the argmax body's motion.
+        ``hard``: which of the two (None: the model's own ``hard`` flag).
         """
         bp = self.body_poses(state, values)
         g = self.gaussians
-        w = self.weights()
-        if self.hard:
+        if self.hard if hard is None else hard:
             lab = self.labels()
             means = (bp.R[lab] @ g.means[..., None])[..., 0] + bp.t[lab]
             qb = bp.q[lab]
         else:
+            w = self.weights()
             moved = torch.einsum("bij,nj->nbi", bp.R, g.means) + bp.t[None]   # (N, K+1, 3)
             means = (w[..., None] * moved).sum(1)
             q = bp.q * torch.where(bp.q[:, :1] < 0, -1.0, 1.0).to(bp.q)

@@ -159,13 +159,7 @@ def _children(parent: list[int], b: int) -> list[int]:
 @torch.no_grad()
 def hard_posed_means(model: ArticulatedGaussians) -> np.ndarray:
     """(S, N, 3) every Gaussian's centre posed with its hard owner's motion in each state, world frame."""
-    lab = model.labels()
-    mu = model.gaussians.means.detach()
-    out = []
-    for s in range(model.num_states):
-        bp = model.body_poses(s)
-        out.append((torch.einsum("nij,nj->ni", bp.R[lab], mu) + bp.t[lab]).double().numpy())
-    return np.stack(out)
+    return np.stack([model.pose(s, hard=True)[0].double().numpy() for s in range(model.num_states)])
 
 
 def keep_children(model: ArticulatedGaussians, cand: ArticulatedGaussians, b: int, ref: int
